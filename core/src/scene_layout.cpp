@@ -5,16 +5,26 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "octocd/error.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/scene.hpp"
 #include "scene_detail.hpp"
 
 namespace octocd {
 
 using namespace scene_detail;
+
+namespace {
+
+/// The fewest tries of a random layout's chunk drawn and tested on the threads (a try is
+/// its 27 cells' chains, about a microsecond; fewer run on the caller).
+constexpr std::size_t kParallelTriesFrom = 4096;
+
+}  // namespace
 
 std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb, const std::string& origin,
                                   const std::vector<Aabb>& placed_before) {
@@ -80,6 +90,15 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
   // binned in its own and the 26 neighbouring cells: the same draws and the same result
   // as testing every placed box, in O(count) instead of O(count^2) (10^6 bodies would
   // otherwise take hours).
+  //
+  // The tries are drawn and tested in chunks on the threads: try t's centre is the
+  // stream's outputs 3t, 3t + 1, 3t + 2 (SplitMix64::skip), so each try of a chunk is
+  // drawn on its own and tested against the bodies placed before the chunk; a free try is
+  // then tested against the chunk's earlier free tries (binned in a second grid of the
+  // same cells); the chunk's tries are then taken in order, each placed when free and
+  // overlapping no try placed earlier in the chunk (tries past the last body are dropped):
+  // what one try after another places, on any thread count. A chunk on one thread runs
+  // its tries one after another.
   constexpr int kTries = 1000;
   out.reserve(std::min<std::size_t>(count, std::size_t{1} << 24));
   std::vector<Aabb> placed;
@@ -131,39 +150,124 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
     h = id;
   };
   for (const Aabb& b : placed_before) insert(b);
-  for (std::size_t k = 0; k < count; ++k) {
-    bool ok = false;
-    for (int t = 0; t < kTries && !ok; ++t) {
-      Vec3 p;
-      for (int a = 0; a < 3; ++a) p[a] = rng.uniform(region.min[a], region.max[a]);
-      const Aabb box = translated(body_local_aabb, p);
-      std::int64_t cc[3];
-      // A drawn centre lies in the region, so its cell is in [1, dims - 2]; clamped there
-      // against rounding: a region with min == max on an axis put it in cell 0, and the
-      // -1 neighbour below read outside `head` (issue 22).
-      for (int a = 0; a < 3; ++a) cc[a] = std::clamp<std::int64_t>(cell_of(static_cast<double>(p[a]), a), 1, dims[a] - 2);
-      ok = true;
-      for (std::int64_t dx = -1; dx <= 1 && ok; ++dx)
-        for (std::int64_t dy = -1; dy <= 1 && ok; ++dy)
-          for (std::int64_t dz = -1; dz <= 1 && ok; ++dz) {
-            // A drawn centre lies in the region: its cell is >= 1 and <= dims - 2.
-            for (std::uint32_t b = head[cell_index(cc[0] + dx, cc[1] + dy, cc[2] + dz)]; b != kNone; b = next[b])
-              if (overlaps(box, placed[b])) {
-                ok = false;
-                break;
-              }
-          }
-      if (ok) {
-        insert(box);
-        out.push_back(p);
-      }
-    }
-    if (!ok)
+
+  // One chunk of tries: centres, boxes, cells (x + dims_x (y + dims_y z), clamped as below),
+  // whether free of the bodies placed before the chunk (kFree), and of the chunk's earlier
+  // free tries too (kFree without kNearEarlier).
+  constexpr std::size_t kChunkTries = std::size_t{1} << 16;
+  constexpr std::uint8_t kFree = 1, kNearEarlier = 2;
+  std::vector<Vec3> try_centre;
+  std::vector<Aabb> try_box;
+  std::vector<std::int64_t> try_cell;
+  std::vector<std::uint8_t> try_state, try_placed;
+  // The chunk's free tries binned like the placed boxes: the lowest-numbered free try of
+  // each cell, then each free try's next in its cell (ascending).
+  std::vector<std::uint32_t> chunk_head;  // as many cells as `head`, once a chunk runs on threads
+  std::vector<std::uint32_t> chunk_next;
+  // Whether an earlier try j < i of the chunk with taken(j) overlaps try i (the free tries
+  // in try i's own and the 26 neighbouring cells).
+  auto earlier_overlap = [&](std::size_t i, auto&& taken) {
+    const std::int64_t home = try_cell[i];
+    for (std::int64_t dz = -1; dz <= 1; ++dz)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        for (std::int64_t dx = -1; dx <= 1; ++dx)
+          for (std::uint32_t j = chunk_head[static_cast<std::size_t>(home + dx + dims[0] * (dy + dims[1] * dz))];
+               j < i; j = chunk_next[j])
+            if (taken(j) && overlaps(try_box[i], try_box[j])) return true;
+    return false;
+  };
+  // Try `first_try + i` of the stream into slot i of the chunk.
+  std::uint64_t first_try = 0;
+  auto draw = [&](std::size_t i) {
+    SplitMix64 r(g.layout.seed);
+    r.skip(3 * (first_try + i));
+    Vec3 p;
+    for (int a = 0; a < 3; ++a) p[a] = r.uniform(region.min[a], region.max[a]);
+    std::int64_t cc[3];
+    // A drawn centre lies in the region, so its cell is in [1, dims - 2]; clamped there
+    // against rounding: a region with min == max on an axis put it in cell 0, and the
+    // -1 neighbour below read outside `head` (issue 22).
+    for (int a = 0; a < 3; ++a) cc[a] = std::clamp<std::int64_t>(cell_of(static_cast<double>(p[a]), a), 1, dims[a] - 2);
+    try_centre[i] = p;
+    try_box[i] = translated(body_local_aabb, p);
+    try_cell[i] = static_cast<std::int64_t>(cell_index(cc[0], cc[1], cc[2]));
+  };
+  // Whether try i overlaps no placed box (those binned in its own and the 26 neighbouring cells).
+  auto free_of_placed = [&](std::size_t i) {
+    const std::int64_t home = try_cell[i];
+    for (std::int64_t dz = -1; dz <= 1; ++dz)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        for (std::int64_t dx = -1; dx <= 1; ++dx)
+          for (std::uint32_t b = head[static_cast<std::size_t>(home + dx + dims[0] * (dy + dims[1] * dz))]; b != kNone;
+               b = next[b])
+            if (overlaps(try_box[i], placed[b])) return false;
+    return true;
+  };
+  std::size_t k = 0;  // bodies placed
+  int rejected = 0;   // consecutive tries rejected for body k
+  auto place = [&](std::size_t i) {
+    try_placed[i] = 1;
+    insert(try_box[i]);
+    out.push_back(try_centre[i]);
+    ++k;
+    rejected = 0;
+  };
+  auto reject = [&] {
+    if (++rejected == kTries)
       c.fail(key,
              "region too small: placed " + std::to_string(k) + " of " + std::to_string(count) +
                  " bodies without overlap, then " + std::to_string(kTries) + " tries failed for body " +
                  std::to_string(k),
              "a region where count bodies fit apart: enlarge layout.min/max, reduce count, or use a grid");
+  };
+  LoopOptions loop;
+  loop.threads = current_threads();
+  loop.min_items = kParallelTriesFrom;
+  while (k < count) {
+    const std::size_t left = count - k;
+    const std::size_t m = std::min(kChunkTries, left + left / 4 + 64);
+    try_centre.resize(m);
+    try_box.resize(m);
+    try_cell.resize(m);
+    try_state.assign(m, 0);
+    try_placed.assign(m, 0);
+    if (loop_threads(m, loop) <= 1) {
+      // On one thread, one try after another, each placed before the next is drawn.
+      for (std::size_t i = 0; i < m && k < count; ++i) {
+        draw(i);
+        if (free_of_placed(i))
+          place(i);
+        else
+          reject();
+      }
+      first_try += m;
+      continue;
+    }
+    parallel_for(m, loop, [&](std::size_t i, unsigned) {
+      draw(i);
+      if (free_of_placed(i)) try_state[i] = kFree;
+    });
+    if (chunk_head.empty()) chunk_head.assign(head.size(), kNone);
+    chunk_next.resize(m);
+    for (std::size_t i = m; i-- > 0;)
+      if (try_state[i] & kFree) {
+        std::uint32_t& h = chunk_head[static_cast<std::size_t>(try_cell[i])];
+        chunk_next[i] = h;
+        h = static_cast<std::uint32_t>(i);
+      }
+    parallel_for(m, loop, [&](std::size_t i, unsigned) {
+      if ((try_state[i] & kFree) && earlier_overlap(i, [](std::size_t) { return true; })) try_state[i] |= kNearEarlier;
+    });
+    for (std::size_t i = 0; i < m && k < count; ++i) {
+      if ((try_state[i] & kFree) &&
+          (!(try_state[i] & kNearEarlier) || !earlier_overlap(i, [&](std::size_t j) { return try_placed[j] != 0; })))
+        place(i);
+      else
+        reject();
+    }
+    for (std::size_t i = 0; i < m; ++i)
+      if (try_state[i] & kFree) chunk_head[static_cast<std::size_t>(try_cell[i])] = kNone;
+    first_try += m;
   }
   return out;
 }

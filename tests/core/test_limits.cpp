@@ -20,6 +20,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 
@@ -193,39 +194,97 @@ TEST(Limits, NestingAndSceneSize) {
   fs::remove_all(dir);
 }
 
-// The random layout bins the placed bodies in a grid; it must place exactly what testing
-// every placed body places (same draws, same rejections).
-TEST(Limits, RandomLayoutEqualsExhaustiveRejection) {
-  for (const float half : {0.05f, 0.013f}) {
-    GroupSpec g;
-    g.count = 600;
-    g.layout.kind = LayoutSpec::Kind::Random;
-    g.layout.region = {{-1, -1, -1}, {1, 1, 1}};
-    g.layout.region_from_domain = false;
-    g.layout.seed = 11;
-    const Aabb local{{-half, -2 * half, -half}, {half, 2 * half, half}};
-    const std::vector<Vec3> got = group_positions(g, local, "r.json");
-    // Reference: the exhaustive rejection sampling of design.md section 3 / docs/scenes.md.
-    SplitMix64 rng(g.layout.seed);
-    std::vector<Aabb> placed;
-    std::vector<Vec3> want;
-    for (int k = 0; k < g.count; ++k) {
-      for (int t = 0; t < 1000; ++t) {
-        Vec3 p;
-        for (int a = 0; a < 3; ++a) p[a] = rng.uniform(g.layout.region.min[a], g.layout.region.max[a]);
-        const Aabb box = translated(local, p);
-        bool ok = true;
-        for (const Aabb& b : placed) ok = ok && !overlaps(box, b);
-        if (ok) {
-          placed.push_back(box);
-          want.push_back(p);
-          break;
-        }
+// The exhaustive rejection sampling of design.md section 3 / docs/scenes.md: each try
+// tested against every box placed (`before` and this group's), 1000 tries a body. Returns
+// the centres placed and, when a body found no room, its index in `failed_at`.
+std::vector<Vec3> exhaustive_layout(const GroupSpec& g, const Aabb& local, const std::vector<Aabb>& before,
+                                    int& failed_at) {
+  SplitMix64 rng(g.layout.seed);
+  std::vector<Aabb> placed = before;
+  std::vector<Vec3> want;
+  failed_at = -1;
+  for (int k = 0; k < g.count; ++k) {
+    bool ok = false;
+    for (int t = 0; t < 1000 && !ok; ++t) {
+      Vec3 p;
+      for (int a = 0; a < 3; ++a) p[a] = rng.uniform(g.layout.region.min[a], g.layout.region.max[a]);
+      const Aabb box = translated(local, p);
+      ok = true;
+      for (const Aabb& b : placed) ok = ok && !overlaps(box, b);
+      if (ok) {
+        placed.push_back(box);
+        want.push_back(p);
       }
     }
+    if (!ok) {
+      failed_at = k;
+      break;
+    }
+  }
+  return want;
+}
+
+GroupSpec random_group(int count, float side, std::uint64_t seed) {
+  GroupSpec g;
+  g.count = count;
+  g.layout.kind = LayoutSpec::Kind::Random;
+  g.layout.region = {{-side, -side, -side}, {side, side, side}};
+  g.layout.region_from_domain = false;
+  g.layout.seed = seed;
+  return g;
+}
+
+// The random layout bins the placed bodies in a grid and draws and tests its tries in
+// chunks on the threads; it must place exactly what testing every placed body places, one
+// try after another (same draws, same rejections), on any thread count.
+TEST(Limits, RandomLayoutEqualsExhaustiveRejection) {
+  for (const float half : {0.05f, 0.013f}) {
+    const GroupSpec g = random_group(600, 1, 11);
+    const Aabb local{{-half, -2 * half, -half}, {half, 2 * half, half}};
+    const std::vector<Vec3> got = group_positions(g, local, "r.json");
+    int failed_at = 0;
+    const std::vector<Vec3> want = exhaustive_layout(g, local, {}, failed_at);
+    ASSERT_EQ(failed_at, -1);
     ASSERT_EQ(got.size(), want.size());
     for (std::size_t i = 0; i < got.size(); ++i)
       ASSERT_TRUE(got[i].x == want[i].x && got[i].y == want[i].y && got[i].z == want[i].z) << i;
+  }
+}
+
+// Bodies packed until no more fit, beside 300 boxes of an earlier group: many tries
+// rejected, several chunks, the first large enough for the threads. The first 4,000 bodies
+// and the body the error names when 6,000 are asked for are the exhaustive test's, on 1, 2
+// and 5 threads.
+TEST(Limits, RandomLayoutInChunksEqualsExhaustiveRejectionOnAnyThreadCount) {
+  const Aabb local{{-0.02f, -0.03f, -0.02f}, {0.02f, 0.03f, 0.02f}};
+  std::vector<Aabb> before;
+  SplitMix64 r(3);
+  for (int i = 0; i < 300; ++i) {
+    Vec3 c;
+    for (int a = 0; a < 3; ++a) c[a] = r.uniform(-0.6f, 0.6f);
+    before.push_back({c - Vec3{0.05f, 0.05f, 0.05f}, c + Vec3{0.05f, 0.05f, 0.05f}});
+  }
+  const GroupSpec full = random_group(6000, 0.58f, 17);
+  int full_failed_at = 0;
+  std::vector<Vec3> want = exhaustive_layout(full, local, before, full_failed_at);
+  ASSERT_GT(full_failed_at, 4000);
+  GroupSpec g = full;
+  g.count = 4000;
+  want.resize(4000);
+  for (const int threads : {1, 2, 5}) {
+    ThreadCount scope(threads);
+    const std::vector<Vec3> got = group_positions(g, local, "r.json", before);
+    ASSERT_EQ(got.size(), want.size()) << threads;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      ASSERT_TRUE(got[i].x == want[i].x && got[i].y == want[i].y && got[i].z == want[i].z) << threads << " " << i;
+    try {
+      group_positions(full, local, "r.json", before);
+      FAIL() << "6,000 bodies placed where " << full_failed_at << " fit";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("placed " + std::to_string(full_failed_at) + " of 6000 bodies"),
+                std::string::npos)
+          << e.what();
+    }
   }
 }
 

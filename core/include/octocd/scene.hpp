@@ -230,6 +230,9 @@ class SplitMix64 {
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
     return z ^ (z >> 31);
   }
+  /// Advances the stream by `n` outputs in O(1) (the state is a counter): the next output is
+  /// the one `n` calls of next() would have been followed by.
+  void skip(std::uint64_t n) { state_ += n * 0x9E3779B97F4A7C15ULL; }
   /// Uniform float in [0, 1): (next() >> 40) * 2^-24 (exact: 24 bits fit a float).
   float unit() { return static_cast<float>(next() >> 40) * (1.0f / 16777216.0f); }
   /// Uniform in [lo, hi): float(double(lo) + double(unit()) * (double(hi) - double(lo))),
@@ -260,7 +263,9 @@ class SplitMix64 {
 ///   with layout.seed), rejected while the body's AABB overlaps (Eq. 6, inclusive) one
 ///   already placed, by this group or in `placed_before`; at most 1000 tries per body,
 ///   else InputError (region too small). Time O(count + placed_before.size()): the
-///   placed boxes are binned in a grid of cells wider than the largest of them.
+///   placed boxes are binned in a grid of cells wider than the largest of them; the tries
+///   are drawn and tested in chunks on current_threads() threads, with the same result on
+///   any thread count.
 /// `body_local_aabb` is the local AABB of one body (centred on the origin, design.md section 3).
 /// `placed_before`: world AABBs (m) a random layout keeps apart from (build_model passes
 /// the bodies of the earlier groups, not the walls); ignored by the grid layout.
