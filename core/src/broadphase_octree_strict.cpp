@@ -324,7 +324,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
         const Aabb bi = sorted_[i];
         const std::uint32_t body_i = items_[i].body;
         for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
-          if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
+          if (overlaps_all_axes(bi, sorted_[j])) emit(body_i, items_[j].body, out);
         }
       }
     }
@@ -333,13 +333,13 @@ class StrictOctreeBroadPhase final : public BroadPhase {
       if (sminx_[i] <= sc.cands[c].box.min.x) {
         const Aabb bi = sorted_[i];
         for (std::uint32_t q = c; q < cend && sc.cands[q].box.min.x <= bi.max.x; ++q) {
-          if (overlaps(bi, sc.cands[q].box)) emit(items_[i].body, sc.cands[q].body, out);
+          if (overlaps_all_axes(bi, sc.cands[q].box)) emit(items_[i].body, sc.cands[q].body, out);
         }
         ++i;
       } else {
         const Aabb bc = sc.cands[c].box;
         for (std::uint32_t q = i; q < node.end && sminx_[q] <= bc.max.x; ++q) {
-          if (overlaps(sorted_[q], bc)) emit(items_[q].body, sc.cands[c].body, out);
+          if (overlaps_all_axes(sorted_[q], bc)) emit(items_[q].body, sc.cands[c].body, out);
         }
         ++c;
       }
@@ -363,7 +363,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     for (std::size_t a = 0; a < rest.size(); ++a) {  // rest x rest, on x (slots in min.x order)
       const Aabb bi = sorted_[rest[a]];
       for (std::size_t b = a + 1; b < rest.size() && sminx_[rest[b]] <= bi.max.x; ++b) {
-        if (overlaps(bi, sorted_[rest[b]])) emit(items_[rest[a]].body, items_[rest[b]].body, out);
+        if (overlaps_all_axes(bi, sorted_[rest[b]])) emit(items_[rest[a]].body, items_[rest[b]].body, out);
       }
     }
     std::size_t a = 0, r = 0;  // across x rest, on x
@@ -371,13 +371,13 @@ class StrictOctreeBroadPhase final : public BroadPhase {
       if (sminx_[across[a]] <= sminx_[rest[r]]) {
         const Aabb bi = sorted_[across[a]];
         for (std::size_t q = r; q < rest.size() && sminx_[rest[q]] <= bi.max.x; ++q) {
-          if (overlaps(bi, sorted_[rest[q]])) emit(items_[across[a]].body, items_[rest[q]].body, out);
+          if (overlaps_all_axes(bi, sorted_[rest[q]])) emit(items_[across[a]].body, items_[rest[q]].body, out);
         }
         ++a;
       } else {
         const Aabb bi = sorted_[rest[r]];
         for (std::size_t q = a; q < across.size() && sminx_[across[q]] <= bi.max.x; ++q) {
-          if (overlaps(sorted_[across[q]], bi)) emit(items_[across[q]].body, items_[rest[r]].body, out);
+          if (overlaps_all_axes(sorted_[across[q]], bi)) emit(items_[across[q]].body, items_[rest[r]].body, out);
         }
         ++r;
       }
@@ -388,7 +388,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     for (std::size_t i = 0; i < across.size(); ++i) {
       const Aabb bi = sorted_[across[i]];
       for (std::size_t j = i + 1; j < across.size() && sorted_[across[j]].min.y <= bi.max.y; ++j) {
-        if (overlaps(bi, sorted_[across[j]])) emit(items_[across[i]].body, items_[across[j]].body, out);
+        if (overlaps_all_axes(bi, sorted_[across[j]])) emit(items_[across[i]].body, items_[across[j]].body, out);
       }
     }
   }

@@ -162,10 +162,12 @@ class SpatialHashBroadPhase final : public BroadPhase {
               for (std::size_t j = i + 1; j < e; ++j) {
                 const std::uint32_t q = entries_[j].body;
                 const std::int32_t* cq = &cell0_[3 * q];
-                // Report only from the cell of the intersection's min corner.
-                if (pack(level, std::max(cp[0], cq[0]), std::max(cp[1], cq[1]), std::max(cp[2], cq[2])) != key)
+                // Overlapping (most cell mates are not), and reported only from the cell of
+                // the intersection's min corner.
+                if (!overlaps_all_axes(boxes[p], boxes[q]) ||
+                    pack(level, std::max(cp[0], cq[0]), std::max(cp[1], cq[1]), std::max(cp[2], cq[2])) != key)
                   continue;
-                if (overlaps(boxes[p], boxes[q])) pairs.push_back({p, q});  // p < q: sorted by body
+                pairs.push_back({p, q});  // p < q: sorted by body
               }
             }
           }

@@ -482,7 +482,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     for (std::size_t p = run.first; p < run.last; ++p)
       for (std::size_t q = p + 1; q < run.last; ++q) {
         const std::uint32_t a = e[p].box, b = e[q].box;
-        if (overlaps(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, run.level), e[p].cell)) emit(worker, a, b);
+        if (overlaps_all_axes(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, run.level), e[p].cell)) emit(worker, a, b);
       }
   });
 
@@ -494,7 +494,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       each_coarser_cell(a, [&](int l, const Cell& c, auto first, auto last) {
         for (auto it = first; it != last; ++it) {
           const std::uint32_t b = it->box;
-          if (overlaps(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, l), c)) emit(worker, a, b);
+          if (overlaps_all_axes(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, l), c)) emit(worker, a, b);
         }
       });
     });

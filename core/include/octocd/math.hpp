@@ -83,16 +83,23 @@ OCTOCD_HD inline Aabb expanded(const Aabb& b, float m) {
 /// scene's theta, or with `auto` each shape's mean edge): the larger, as std::max gives it.
 OCTOCD_HD inline float pair_theta(float theta_a, float theta_b) { return (theta_a < theta_b) ? theta_b : theta_a; }
 
-/// Paper Eq. 6: inclusive AABB overlap on all three axes (touching faces overlap), the
-/// rule Bullet and FCL use too. On the device all six comparisons are evaluated (bitwise,
-/// not short-circuit: the same answer for every input, NaN included), so a kernel loads
-/// both boxes at once instead of a chain of dependent loads and branches; the host keeps
-/// the early exit (the CPU engine ran bunny-stack-50 5% slower evaluating all six).
-OCTOCD_HD inline bool overlaps(const Aabb& a, const Aabb& b) {
-#ifdef __CUDA_ARCH__
+/// overlaps() (paper Eq. 6) with all six comparisons evaluated (bitwise, not
+/// short-circuit): the same answer for every input, NaN included, without a branch per
+/// axis. For loops where most pairs miss at unpredictable axes (a spatial hash's cell
+/// mates), and on the device, where a kernel then loads both boxes at once instead of a
+/// chain of dependent loads and branches.
+OCTOCD_HD inline bool overlaps_all_axes(const Aabb& a, const Aabb& b) {
   return (a.min.x <= b.max.x) & (a.max.x >= b.min.x) &  //
          (a.min.y <= b.max.y) & (a.max.y >= b.min.y) &  //
          (a.min.z <= b.max.z) & (a.max.z >= b.min.z);
+}
+
+/// Paper Eq. 6: inclusive AABB overlap on all three axes (touching faces overlap), the
+/// rule Bullet and FCL use too. On the device overlaps_all_axes; the host keeps the early
+/// exit (the CPU engine ran bunny-stack-50 5% slower evaluating all six).
+OCTOCD_HD inline bool overlaps(const Aabb& a, const Aabb& b) {
+#ifdef __CUDA_ARCH__
+  return overlaps_all_axes(a, b);
 #else
   return a.min.x <= b.max.x && a.max.x >= b.min.x &&  //
          a.min.y <= b.max.y && a.max.y >= b.min.y &&  //
