@@ -164,17 +164,23 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
   // each cell, then each free try's next in its cell (ascending).
   std::vector<std::uint32_t> chunk_head;  // as many cells as `head`, once a chunk runs on threads
   std::vector<std::uint32_t> chunk_next;
-  // Whether an earlier try j < i of the chunk with taken(j) overlaps try i (the free tries
-  // in try i's own and the 26 neighbouring cells).
-  auto earlier_overlap = [&](std::size_t i, auto&& taken) {
+  // Whether try i overlaps a box `boxes[j]` with taken(j) binned (chains `heads`, `nexts`)
+  // in its own or the 26 neighbouring cells; a chain is followed while j < `limit` (kNone:
+  // to its end; the chunk's chains ascend, so `i` stops them at the earlier tries).
+  auto near_hit = [&](std::size_t i, const std::vector<std::uint32_t>& heads, const std::vector<std::uint32_t>& nexts,
+                      const auto& boxes, std::size_t limit, auto&& taken) {
     const std::int64_t home = try_cell[i];
     for (std::int64_t dz = -1; dz <= 1; ++dz)
       for (std::int64_t dy = -1; dy <= 1; ++dy)
         for (std::int64_t dx = -1; dx <= 1; ++dx)
-          for (std::uint32_t j = chunk_head[static_cast<std::size_t>(home + dx + dims[0] * (dy + dims[1] * dz))];
-               j < i; j = chunk_next[j])
-            if (taken(j) && overlaps(try_box[i], try_box[j])) return true;
+          for (std::uint32_t j = heads[static_cast<std::size_t>(home + dx + dims[0] * (dy + dims[1] * dz))]; j < limit;
+               j = nexts[j])
+            if (taken(j) && overlaps(try_box[i], boxes[j])) return true;
     return false;
+  };
+  // Whether an earlier free try j < i of the chunk with taken(j) overlaps try i.
+  auto earlier_overlap = [&](std::size_t i, auto&& taken) {
+    return near_hit(i, chunk_head, chunk_next, try_box, i, taken);
   };
   // Try `first_try + i` of the stream into slot i of the chunk.
   std::uint64_t first_try = 0;
@@ -192,16 +198,9 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
     try_box[i] = translated(body_local_aabb, p);
     try_cell[i] = static_cast<std::int64_t>(cell_index(cc[0], cc[1], cc[2]));
   };
-  // Whether try i overlaps no placed box (those binned in its own and the 26 neighbouring cells).
+  // Whether try i overlaps no placed box.
   auto free_of_placed = [&](std::size_t i) {
-    const std::int64_t home = try_cell[i];
-    for (std::int64_t dz = -1; dz <= 1; ++dz)
-      for (std::int64_t dy = -1; dy <= 1; ++dy)
-        for (std::int64_t dx = -1; dx <= 1; ++dx)
-          for (std::uint32_t b = head[static_cast<std::size_t>(home + dx + dims[0] * (dy + dims[1] * dz))]; b != kNone;
-               b = next[b])
-            if (overlaps(try_box[i], placed[b])) return false;
-    return true;
+    return !near_hit(i, head, next, placed, kNone, [](std::size_t) { return true; });
   };
   std::size_t k = 0;  // bodies placed
   int rejected = 0;   // consecutive tries rejected for body k
