@@ -59,7 +59,7 @@ struct GeometryDry {
                             {&s.resting_worst, resting_worst}, {&s.speculative_worst, speculative_worst},
                             {&s.aabb_angle_worst, aabb_angle_worst}})
       *to = std::max(*to, from);
-    s.shape_angles.insert(s.shape_angles.end(), shape_angles.begin(), shape_angles.end());
+    for (double a : shape_angles) s.shape_angles.push_back(a);
   }
 };
 
@@ -93,6 +93,25 @@ std::string sat_axes_text(std::uint32_t accepted, double epsilon, double depth) 
                      depth);
 }
 }  // namespace
+
+void PhysicsValidators::Impl::AngleSample::push_back(double deg) {
+  constexpr std::size_t n = static_cast<std::size_t>(180.0 / kBinDeg) + 1;
+  if (bins.empty()) bins.assign(n, 0);
+  const double k = deg / kBinDeg;
+  bins[k >= 0 ? (k < double(n - 1) ? static_cast<std::size_t>(k) : n - 1) : 0] += 1;
+  ++count;
+  sum += deg;
+  max = std::max(max, deg);
+}
+
+double PhysicsValidators::Impl::AngleSample::at(std::uint64_t r) const {
+  std::uint64_t seen = 0;
+  for (std::size_t k = 0; k < bins.size(); ++k) {
+    seen += bins[k];
+    if (r < seen) return std::min(max, (double(k) + 0.5) * kBinDeg);
+  }
+  return max;
+}
 
 namespace {
 
@@ -646,15 +665,11 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const 
   }
   std::string stats;
   if (aabb && !s.shape_angles.empty()) {
-    std::vector<double> a = s.shape_angles;
-    std::sort(a.begin(), a.end());
-    double mean = 0;
-    for (double x : a) mean += x;
-    mean /= double(a.size());
+    const AngleSample& a = s.shape_angles;
     stats = fmt::format(
         "; against the posed shapes (figure, not judged: the engine resolves on world AABBs): "
         "mean {:.1f} deg, median {:.1f}, p95 {:.1f}, max {:.1f}",
-        mean, a[a.size() / 2], a[a.size() * 95 / 100], a.back());
+        a.sum / double(a.count), a.at(a.count / 2), a.at(a.count * 95 / 100), a.max);
   }
   const std::string sign = fmt::format("sign agreement {:.4f} of {} rows",
                                        s.sign_rows ? double(s.sign_agree) / double(s.sign_rows) : 1.0, s.sign_rows);

@@ -551,7 +551,21 @@ struct PhysicsValidators::Impl {
   std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
   std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
-  std::vector<double> shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
+  /// Angles in degrees ([0, 180]) streamed into bins of kBinDeg: the count, mean and largest
+  /// exact, a quantile to within half a bin (its bin's centre, at most the largest), in
+  /// memory that does not grow with the run (a figure, not judged).
+  struct AngleSample {
+    static constexpr double kBinDeg = 0.01;
+    std::vector<std::uint64_t> bins;  // allocated at the first angle
+    std::uint64_t count = 0;
+    double sum = 0, max = 0;
+    /// Adds one angle (deg); NaN and values outside [0, 180] go to the end bins.
+    void push_back(double deg);
+    bool empty() const { return count == 0; }
+    /// The angle of rank r (0-based, r < count) to within kBinDeg / 2.
+    double at(std::uint64_t r) const;
+  };
+  AngleSample shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
   std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
