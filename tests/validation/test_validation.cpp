@@ -379,12 +379,13 @@ ValidationResult feasibility_after_step(const Scene& scene, Edit&& edit) {
   return find(v.results(), "impulse-feasibility");
 }
 
-// impulse-feasibility's programme where CLP's unscaled dual simplex reports an optimum whose
-// impulses leave a resting box (its bound 1e-9 kg m/s) 102 and 23 x off: two islands of
-// boxes-uniform-1m's frames 46 and 47 (the cpu and cuda engines step them bit for bit), cut
-// out with their wall. The row's second opinions (CLP's dual simplex with its scaling, its
-// primal simplex) find impulses within 0.003 of the bounds; the resting box given a sideways
-// velocity that nothing pushes still fails.
+// impulse-feasibility's programme on two islands of boxes-uniform-1m's frames 46 and 47 (the
+// cpu and cuda engines step them bit for bit), cut out with their wall, where a resting box
+// (its bound 1e-9 kg m/s) was left 102 and 23 x off by CLP's dual simplex on columns in kg m/s
+// (impulses a few 1e-9 below 0 taken as 0; FeasibilityColumnsInUnitsOfTheirBounds): its
+// second opinions (its dual simplex with its scaling, its primal simplex) found impulses
+// within 0.003 of the bounds, and the columns in units of their bounds do on the first solve.
+// The resting box given a sideways velocity that nothing pushes still fails.
 TEST(Validators, FeasibilityTakesSecondOpinionsOnAFailure) {
   const double L = 0.06, S = 0.03;
   const std::vector<Scene> islands = {
@@ -412,6 +413,36 @@ TEST(Validators, FeasibilityTakesSecondOpinionsOnAFailure) {
     EXPECT_NE(planted.detail.find("infeasible 1 of 1 island-steps"), std::string::npos)
         << scene.name << ": " << planted.detail;
   }
+}
+
+// impulse-feasibility's programme where CLP leaves an impulse a few 1e-9 kg m/s below 0
+// (inside its tolerance on a column's bound when the columns are in kg m/s): taken as 0, it
+// left a resting box of boxes-uniform-1m's frame 256 (its bound 1e-9 kg m/s) 3.2 x off on
+// every solve, while the engine's own impulses explain the step. The island of 9 boxes cut
+// out with its wall (the cpu engine's state before the step); the columns are scaled to
+// their rows' bounds (feasibility_programme.cpp). The resting box (body 6) pushed sideways
+// along its wall by 10^-3 kg m/s still fails.
+TEST(Validators, FeasibilityColumnsInUnitsOfTheirBounds) {
+  const double L = 0.06, S = 0.03;
+  const Scene scene = island_of_boxes(
+      "frame-256", {{{{L, L, L}, {-1.50899065, 1.03579557, -7.83187771}, {0, 0, 0}}},
+                    {{{S, S, S}, {-1.4380703, 0.956857681, -7.74182034}, {0.0440209061, 0.123933017, 0.0223416183}}},
+                    {{{S, S, S}, {-1.53893197, 0.955703497, -7.74199677}, {0.234047472, 0.00365946139, 0.00906473026}}},
+                    {{{L, L, L}, {-1.2759161, 1.02733028, -7.82561922}, {-0.108271435, 0.0581813566, -0.288225621}}},
+                    {{{L, L, L}, {-1.47998559, 1.04659963, -7.71154451}, {0.0133332498, 0.0933347419, 0.00322915521}}},
+                    {{{S, S, S}, {-1.36588466, 1.1064775, -7.79340601}, {-0.116171069, -0.25140205, -0.314820796}}},
+                    {{{S, S, S}, {-1.45562768, 0.896854699, -7.77458763}, {0.135627627, 0.0619862527, -0.107658662}}},
+                    {{{S, S, S}, {-1.42586422, 1.13648748, -7.73914099}, {-0.115097098, 0.083334744, -0.0371444076}}},
+                    {{{S, S, S}, {-1.45027947, 0.896986425, -7.68848801}, {0.156151041, 0.133933023, 0.0946545303}}}});
+  auto feasibility = [&](double nudge) {
+    return feasibility_after_step(scene, [&](FrameRecord& rec) { rec.v_post[6].x += static_cast<float>(nudge); });
+  };
+  const ValidationResult clean = feasibility(0.0);
+  EXPECT_TRUE(clean.pass) << clean.detail;
+  EXPECT_NE(clean.detail.find("of 1 steps"), std::string::npos) << clean.detail;
+  const ValidationResult planted = feasibility(1e-3);
+  EXPECT_FALSE(planted.pass) << planted.detail;
+  EXPECT_NE(planted.detail.find("infeasible 1 of 1 island-steps"), std::string::npos) << planted.detail;
 }
 
 // impulse-feasibility's islands passed on witness impulses (Gauss-Seidel sweeps within the

@@ -257,6 +257,12 @@ void solve_together(std::vector<Solve>& solves, Simplex simplex = Simplex::Dual)
   idx.reserve(nnz);
   val.reserve(nnz);
   start.reserve(ncols + 1);
+  // Each impulse column is scaled so that its largest entry (in units of its rows' bounds)
+  // is 1: CLP's tolerance on a column's bound (lambda >= 0, about 1e-7) then stands for at
+  // most 1e-7 of a bound, where in kg m/s it would be a hundred times a resting body's bound
+  // of 1e-9 (a column a few 1e-9 below 0, taken as 0, left boxes-uniform-1m's frame 256
+  // 3.2 x its bound off). lambda_c = scale_c x_c.
+  std::vector<double> scale(ncols, 1.0);
   int row0 = 0;
   std::size_t col0 = 0;
   for (const Solve& s : solves) {
@@ -264,12 +270,17 @@ void solve_together(std::vector<Solve>& solves, Simplex simplex = Simplex::Dual)
     const std::vector<double>& sig = *s.sig;
     const std::vector<double>& rhs = *s.rhs;
     for (std::size_t c = 0; c < p.ncols(); ++c) {
+      double largest = 0;
+      for (int e = p.col_start[c]; e < p.col_start[c + 1]; ++e)
+        largest = std::max(largest, std::fabs(p.value[std::size_t(e)] / sig[std::size_t(p.row_index[std::size_t(e)])]));
+      const double k = largest > 0 ? 1.0 / largest : 1.0;
+      scale[col0 + c] = k;
       for (int e = p.col_start[c]; e < p.col_start[c + 1]; ++e) {
-        const double v = p.value[std::size_t(e)] / sig[std::size_t(p.row_index[std::size_t(e)])];
+        const double v = k * (p.value[std::size_t(e)] / sig[std::size_t(p.row_index[std::size_t(e)])]);
         val.push_back(v);
         val.push_back(v);
       }
-      for (const auto& entry : p.budget_of[c]) val.push_back(entry.second);
+      for (const auto& entry : p.budget_of[c]) val.push_back(k * entry.second);
     }
     for (std::size_t r = 0; r < p.rows; ++r) {
       val.push_back(-1.0);
@@ -311,7 +322,7 @@ void solve_together(std::vector<Solve>& solves, Simplex simplex = Simplex::Dual)
     s.lambda.assign(p.ncols(), 0.0);
     s.figure = std::numeric_limits<double>::quiet_NaN();
     if (solved) {
-      for (std::size_t c = 0; c < p.ncols(); ++c) s.lambda[c] = std::max(0.0, x[col0 + c]);
+      for (std::size_t c = 0; c < p.ncols(); ++c) s.lambda[c] = scale[col0 + c] * std::max(0.0, x[col0 + c]);
       s.figure = p.figure_of(*s.rhs, *s.sig, s.lambda, residual);
     }
     col0 += p.ncols() + 1;
@@ -603,11 +614,9 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     } else {
       sigma = sigma0;
     }
-    // A failure only where CLP's second opinions find no impulses within the bounds either:
-    // its unscaled dual simplex can report an optimum whose impulses leave rows far off
-    // (bounds of 1e-9 beside 1e-5 in one programme: boxes-uniform-1m's frames 46 and 47, 102
-    // and 23 x a resting box's bound where feasible impulses leave 0.003 x). Any impulses
-    // found are a witness, so the smallest figure stands.
+    // A failure only where CLP's second opinions find no impulses within the bounds either
+    // (a programme's bounds span 1e-9 to 1e-5 kg m/s where a resting box meets moving
+    // ones). Any impulses found are a witness, so the smallest figure stands.
     for (const Simplex second : {Simplex::DualScaled, Simplex::Primal}) {
       if (figure <= 1.0 || !std::isfinite(figure)) break;
       std::vector<double> lambda2;
