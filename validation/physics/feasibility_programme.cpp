@@ -260,8 +260,8 @@ void solve_together(std::vector<Solve>& solves, Simplex simplex = Simplex::Dual)
   // Each impulse column is scaled so that its largest entry (in units of its rows' bounds)
   // is 1: CLP's tolerance on a column's bound (lambda >= 0, about 1e-7) then stands for at
   // most 1e-7 of a bound, where in kg m/s it would be a hundred times a resting body's bound
-  // of 1e-9 (a column a few 1e-9 below 0, taken as 0, left boxes-uniform-1m's frame 256
-  // 3.2 x its bound off). lambda_c = scale_c x_c.
+  // of 1e-9 (an impulse a few 1e-9 below 0, taken as 0, leaves that body several bounds
+  // off). lambda_c = scale_c x_c.
   std::vector<double> scale(ncols, 1.0);
   int row0 = 0;
   std::size_t col0 = 0;
