@@ -309,14 +309,9 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   // Both lists read in place, the rows' pairs first.
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
-  std::vector<std::uint32_t> dynamic_touched;
   auto join = [&](const Pair& q) {
     parent[find(q.a)] = find(q.b);
-    for (const std::uint32_t i : {q.a, q.b})
-      if (!touched[i]) {
-        touched[i] = 1;
-        if (dynamic(i)) dynamic_touched.push_back(i);
-      }
+    touched[q.a] = touched[q.b] = 1;
   };
   for (const ContactRecord& c : rec.contacts) join(c.pair);
   for (const Pair& q : rec.confirmed) join(q);
@@ -335,18 +330,26 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
         link);
     for (const Pair& q : with_static) graph.statics[find(q.a)] = 1;
   }
-  // The groups read off the dynamic bodies touched (root, body), sorted: roots ascending,
-  // each group's bodies ascending.
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> by_root(dynamic_touched.size());
-  for (std::size_t k = 0; k < dynamic_touched.size(); ++k) by_root[k] = {find(dynamic_touched[k]), dynamic_touched[k]};
-  std::sort(by_root.begin(), by_root.end());
-  for (std::size_t k = 0; k < by_root.size(); ++k) {
-    if (k == 0 || by_root[k].first != by_root[k - 1].first) graph.groups.emplace_back(by_root[k].first, std::vector<std::uint32_t>{});
-    graph.groups.back().second.push_back(by_root[k].second);
+  // The groups read off the dynamic bodies touched: roots ascending, each group's bodies
+  // ascending, in passes over the bodies in order (no sort). group_index first counts each
+  // root's bodies, then holds each root's group and each member's.
+  std::vector<std::uint32_t>& group_index = graph.group_index;
+  group_index.assign(n, 0);
+  auto member = [&](std::size_t i) { return touched[i] && dynamic(static_cast<std::uint32_t>(i)); };
+  for (std::size_t i = 0; i < n; ++i)
+    if (member(i)) ++group_index[find(static_cast<std::uint32_t>(i))];
+  for (std::size_t r = 0; r < n; ++r) {
+    if (!group_index[r]) continue;
+    graph.groups.emplace_back(static_cast<std::uint32_t>(r), std::vector<std::uint32_t>{});
+    graph.groups.back().second.reserve(group_index[r]);
+    group_index[r] = static_cast<std::uint32_t>(graph.groups.size() - 1);
   }
-  graph.group_index.resize(n);
-  for (std::size_t gi = 0; gi < graph.groups.size(); ++gi)
-    for (const std::uint32_t i : graph.groups[gi].second) graph.group_index[i] = static_cast<std::uint32_t>(gi);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!member(i)) continue;
+    const std::uint32_t gi = group_index[find(static_cast<std::uint32_t>(i))];
+    graph.groups[gi].second.push_back(static_cast<std::uint32_t>(i));
+    group_index[i] = gi;
+  }
   return graph;
 }
 
