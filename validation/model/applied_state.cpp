@@ -15,6 +15,7 @@
 #include "applied_state.hpp"
 
 #include "../physics/dmath.hpp"
+#include "../src/components.hpp"
 #include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
@@ -92,10 +93,9 @@ struct SearchCounts {
 };
 
 /// An isolated dynamic group's figures on the applied state (an island of two dynamic
-/// bodies or more with no static body, none clamped), judged in the order of its
-/// union-find root.
+/// bodies or more with no static body, none clamped), judged in island order.
 struct GroupFigures {
-  std::uint32_t root = 0, bodies = 0, first = 0;
+  std::uint32_t bodies = 0, first = 0;
   bool centre = false;  // an isolated pair, each body with one contact: the centre is judged
   double dp = 0, bound = 0, exchange = 0, dc = 0, cbound = 0, cexchange = 0;
 };
@@ -109,7 +109,6 @@ struct IslandTally {
   double worst = 0.0;
   std::size_t first_island = std::numeric_limits<std::size_t>::max();
   std::string first;
-  std::vector<GroupFigures> groups;
 };
 
 /// Work space of one island's run (AppliedStateJudge::Impl::run), kept per thread.
@@ -150,25 +149,23 @@ struct AppliedStateJudge::Impl {
   const FrameRecord* rec = nullptr;
   std::vector<D3> x_int, v_int;
   std::vector<F3> xf_int, vf_int;
-  std::vector<std::uint32_t> parent;
-  /// The frame's islands, numbered in the order of their first dynamic body: island j's
-  /// dynamic bodies are dyn[dyn_start[j] .. dyn_start[j + 1]) (in body order), its contacts
-  /// con[con_start[j] .. con_start[j + 1]) (indices into rec.confirmed, in order); `root`:
-  /// each dynamic body's union-find root; `island_of`: per root, its island; `slot`: each
-  /// dynamic body's index in its island's list.
-  std::vector<std::uint32_t> root, dyn_start, dyn, con_start, con, slot, cursor;
-  /// The index's scratch: per root the lowest body of its island; the bodies joined to
-  /// another's root, then the bodies of islands of two or more (ascending); each island's
-  /// lowest body (ascending: the islands' order).
-  std::vector<std::uint32_t> lowest, joined, firsts;
+  /// The frame's islands, numbered in the order of their first dynamic body (ascending
+  /// roots: components.hpp names each island by its lowest body): island j's root is
+  /// firsts[j]; its dynamic bodies are by_root.items[dyn_start[j] .. dyn_start[j + 1]) (in
+  /// body order; by_root groups the dynamic bodies per root), its contacts con's group j
+  /// (indices into rec.confirmed, in order); `island_of`: per root, its island; `slot`:
+  /// each dynamic body's index in its island's list.
+  Components components;
+  GroupScratch group_scratch;
+  GroupedItems by_root, con;
+  std::vector<std::uint32_t> firsts, dyn_start, slot;
   std::vector<std::int32_t> island_of;
+  /// Per island: its group's figures (written by judge_island where `isolated` is 1).
+  std::vector<GroupFigures> group_figures;
+  std::vector<std::uint8_t> isolated;
   /// Per thread of the islands' loop (the memory of its island and run kept between frames).
   std::vector<IslandWorker> workers;
 
-  std::uint32_t find(std::uint32_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  }
 
   /// Runs design.md section 6's passes over `is` with the first forced.size() near-ties taking the
   /// outcomes given, the rest the float32 proposal (where consistent).
@@ -189,9 +186,11 @@ struct AppliedStateJudge::Impl {
   /// Builds island j of the frame in `is` (its locals: the dynamic bodies, then each static
   /// body its contacts touch, in the order first touched).
   void build_island(std::size_t j, Island& is) const;
-  /// Searches island j on worker `w` and adds its bodies' verdicts and its group's figures
-  /// to the worker's tally.
-  void judge_island(std::size_t j, bool judge_response, IslandWorker& w) const;
+  /// Searches island j on worker `w` and adds its bodies' verdicts to the worker's tally;
+  /// where the island is an isolated group, writes its figures to `group` and 1 to
+  /// `group_isolated` (left as they are otherwise).
+  void judge_island(std::size_t j, bool judge_response, IslandWorker& w, GroupFigures& group,
+                    std::uint8_t& group_isolated) const;
   int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
@@ -619,12 +618,12 @@ Run AppliedStateJudge::Impl::search_branches(const Island& is, const Run& first,
 
 void AppliedStateJudge::Impl::build_island(std::size_t j, Island& is) const {
   const std::vector<float>& w = model->initial.w;
-  is.local.assign(dyn.begin() + dyn_start[j], dyn.begin() + dyn_start[j + 1]);
+  is.local.assign(by_root.items.begin() + dyn_start[j], by_root.items.begin() + dyn_start[j + 1]);
   is.dynamic = static_cast<std::uint32_t>(is.local.size());
   is.contacts.clear();
   is.ends.clear();
-  for (std::size_t k = con_start[j]; k < con_start[j + 1]; ++k) {
-    const Pair q = rec->confirmed[con[k]];
+  for (const std::uint32_t c : con.group(j)) {
+    const Pair q = rec->confirmed[c];
     std::array<std::uint32_t, 2> e{};
     for (int side = 0; side < 2; ++side) {
       const std::uint32_t body = side == 0 ? q.a : q.b;
@@ -636,12 +635,13 @@ void AppliedStateJudge::Impl::build_island(std::size_t j, Island& is) const {
         if (it == is.local.end()) is.local.push_back(body);
       }
     }
-    is.contacts.push_back(con[k]);
+    is.contacts.push_back(c);
     is.ends.push_back(e);
   }
 }
 
-void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, IslandWorker& wk) const {
+void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, IslandWorker& wk, GroupFigures& g,
+                                           std::uint8_t& group_isolated) const {
   const Model& m = *model;
   const Scene& sc = m.scene;
   const FrameRecord& fr = *rec;
@@ -728,8 +728,7 @@ void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, I
       ctol += mi * r.x_tol[l][k];
     }
   }
-  GroupFigures g;
-  g.root = root[is.local[0]];
+  group_isolated = 1;
   g.bodies = is.dynamic;
   g.first = is.local[0];
   g.dp = len3(p1 - p0);
@@ -739,7 +738,6 @@ void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, I
   g.dc = len3(c1 - c0);
   g.cbound = tol.applied_conservation_rel * cexchange + ctol + 1e-12;
   g.cexchange = cexchange;
-  t.groups.push_back(g);
 }
 
 void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
@@ -778,94 +776,66 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
 
   // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
   // contact with a static body belongs to its dynamic body's island. Numbered in the order
-  // of their first dynamic body; bodies and contacts listed per island (counted, then placed).
-  // The per-body passes on the validators' threads, the unions and the bodies of islands of
-  // two or more on this thread; the same roots, numbers and lists as one pass in body order.
+  // of their first dynamic body; bodies and contacts listed per island in their order. On
+  // the validators' threads (components.hpp: the unions by index, so each root is its
+  // island's lowest body whatever the threads' order; the lists by group_items).
   const unsigned body_threads = loop_threads(s.threads, n, kParallelIntegrateFrom);
   auto dynamic = [&](std::size_t i) { return w[i] > 0.0f; };
-  s.parent.resize(n);
-  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) { s.parent[i] = static_cast<std::uint32_t>(i); });
-  for (const Pair& q : rec.confirmed)
-    if (w[q.a] > 0.0f && w[q.b] > 0.0f) s.parent[s.find(q.a)] = s.find(q.b);
-  // Each dynamic body's root (the parents only read), and the lowest body of each root's
-  // island (`lowest`, per root; its root, a dynamic body, is one of them).
-  s.root.resize(n);
-  s.lowest.resize(n);
-  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) {
-    std::uint32_t r = static_cast<std::uint32_t>(i);
-    while (s.parent[r] != r) r = s.parent[r];
-    s.root[i] = r;
-    s.lowest[i] = static_cast<std::uint32_t>(i);
-  });
+  s.components.reset(n, body_threads, s.stop);
+  s.components.join_all(
+      rec.confirmed.size(), loop_threads(s.threads, rec.confirmed.size(), kParallelIntegrateFrom), s.stop,
+      [&](std::size_t c) { return w[rec.confirmed[c].a] > 0.0f && w[rec.confirmed[c].b] > 0.0f; },
+      [&](std::size_t c) { return rec.confirmed[c]; });
+  s.components.settle(body_threads, s.stop);
+  const std::vector<std::uint32_t>& root = s.components.roots();
+  group_items(
+      n, n, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) ? std::size_t(root[i]) : n; },
+      s.group_scratch, s.by_root);
   parallel_select(
-      n, s.joined, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && s.root[i] != i; },
-      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
-  for (const std::uint32_t i : s.joined) s.lowest[s.root[i]] = std::min(s.lowest[s.root[i]], i);
-  // Islands numbered in the order of their lowest body; each counts its root and its bodies
-  // joined to it.
-  parallel_select(
-      n, s.firsts, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && s.lowest[s.root[i]] == i; },
-      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
+      n, s.firsts, body_threads, s.stop, [&](std::size_t r) { return s.by_root.size(r) > 0; },
+      [](std::size_t r) { return static_cast<std::uint32_t>(r); });
   const std::size_t islands = s.firsts.size();
   s.island_of.resize(n);
-  parallel_items_on(islands, loop_threads(s.threads, islands, kParallelIntegrateFrom), s.stop,
-                    [&](std::size_t j, unsigned) { s.island_of[s.root[s.firsts[j]]] = static_cast<std::int32_t>(j); });
-  s.dyn_start.assign(islands + 1, 1);
-  s.dyn_start[0] = 0;
-  for (const std::uint32_t i : s.joined) ++s.dyn_start[static_cast<std::size_t>(s.island_of[s.root[i]]) + 1];
-  for (std::size_t j = 0; j < islands; ++j) s.dyn_start[j + 1] += s.dyn_start[j];
-  // Each island's bodies in body order: an island of one body on the threads, the bodies of
-  // larger ones on this thread.
-  s.dyn.resize(s.dyn_start.back());
+  s.dyn_start.resize(islands + 1);
+  s.dyn_start[islands] = static_cast<std::uint32_t>(s.by_root.items.size());
   s.slot.resize(n);
-  auto island_size = [&](std::size_t i) {
-    const std::size_t j = static_cast<std::size_t>(s.island_of[s.root[i]]);
-    return s.dyn_start[j + 1] - s.dyn_start[j];
-  };
-  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) {
-    if (!dynamic(i) || island_size(i) != 1) return;
-    s.slot[i] = 0;
-    s.dyn[s.dyn_start[static_cast<std::size_t>(s.island_of[s.root[i]])]] = static_cast<std::uint32_t>(i);
+  parallel_items_on(islands, loop_threads(s.threads, islands, kParallelIntegrateFrom), s.stop,
+                    [&](std::size_t j, unsigned) {
+    const std::uint32_t r = s.firsts[j];
+    s.island_of[r] = static_cast<std::int32_t>(j);
+    const std::size_t first = s.by_root.first[r];
+    s.dyn_start[j] = static_cast<std::uint32_t>(first);
+    for (std::size_t k = first; k < s.by_root.first[r + 1]; ++k)
+      s.slot[s.by_root.items[k]] = static_cast<std::uint32_t>(k - first);
   });
-  parallel_select(
-      n, s.joined, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && island_size(i) > 1; },
-      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
-  s.cursor.assign(s.dyn_start.begin(), s.dyn_start.end() - 1);
-  for (const std::uint32_t i : s.joined) {
-    const std::size_t j = static_cast<std::size_t>(s.island_of[s.root[i]]);
-    s.slot[i] = s.cursor[j] - s.dyn_start[j];
-    s.dyn[s.cursor[j]++] = i;
-  }
+  const std::vector<std::uint32_t>& dyn = s.by_root.items;  // island j's: dyn[dyn_start[j] .. dyn_start[j + 1])
   auto island_of_contact = [&](const Pair& q) {
-    return static_cast<std::size_t>(s.island_of[s.root[w[q.a] > 0.0f ? q.a : q.b]]);
+    return static_cast<std::size_t>(s.island_of[root[w[q.a] > 0.0f ? q.a : q.b]]);
   };
-  s.con_start.assign(islands + 1, 0);
-  for (const Pair& q : rec.confirmed)
-    if (w[q.a] > 0.0f || w[q.b] > 0.0f) ++s.con_start[island_of_contact(q) + 1];  // static-static: changes nothing
-  for (std::size_t j = 0; j < islands; ++j) s.con_start[j + 1] += s.con_start[j];
-  s.con.resize(s.con_start.back());
-  s.cursor.assign(s.con_start.begin(), s.con_start.end() - 1);
-  for (std::size_t c = 0; c < rec.confirmed.size(); ++c) {
-    const Pair q = rec.confirmed[c];
-    if (w[q.a] > 0.0f || w[q.b] > 0.0f) s.con[s.cursor[island_of_contact(q)]++] = static_cast<std::uint32_t>(c);
-  }
+  group_items(
+      rec.confirmed.size(), islands, loop_threads(s.threads, rec.confirmed.size(), kParallelIntegrateFrom), s.stop,
+      [&](std::size_t c) {
+        const Pair q = rec.confirmed[c];
+        return w[q.a] > 0.0f || w[q.b] > 0.0f ? island_of_contact(q) : islands;  // static-static: changes nothing
+      },
+      s.group_scratch, s.con);
 
   // Per island, on the validators' threads: the run judged against, each dynamic body
   // against it, and its group's figures; the threads' tallies are then summed (a verdict
   // never depends on the thread count).
-  const std::size_t island_work = s.dyn.size() + s.con.size();  // the search's size
+  const std::size_t island_work = dyn.size() + s.con.items.size();  // the search's size
   const unsigned island_threads = island_work >= kParallelIslandWorkFrom ? loop_threads(s.threads, islands, 2) : 1u;
   if (s.workers.size() < island_threads) s.workers.resize(island_threads);
-  for (IslandWorker& wk : s.workers) {
-    wk.tally = IslandTally{};
-    wk.tally.groups.clear();
-  }
-  parallel_items_on(islands, island_threads, s.stop,
-                    [&](std::size_t j, unsigned t) { s.judge_island(j, judge_response, s.workers[t]); });
+  for (IslandWorker& wk : s.workers) wk.tally = IslandTally{};
+  s.group_figures.resize(islands);
+  s.isolated.resize(islands);
+  parallel_items_on(islands, island_threads, s.stop, [&](std::size_t j, unsigned t) {
+    s.isolated[j] = 0;
+    s.judge_island(j, judge_response, s.workers[t], s.group_figures[j], s.isolated[j]);
+  });
   std::size_t first_island = std::numeric_limits<std::size_t>::max();
   const std::string* first = nullptr;
   std::uint64_t failures = 0;
-  std::vector<GroupFigures> groups;
   for (const IslandWorker& wk : s.workers) {
     const IslandTally& t = wk.tally;
     s.near_ties += t.counts.near_ties;
@@ -883,16 +853,16 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
       first_island = t.first_island;
       first = &t.first;
     }
-    groups.insert(groups.end(), t.groups.begin(), t.groups.end());
   }
   if (first && s.bodies.failures == 0) s.bodies.first = *first;
   s.bodies.failures += failures;
 
-  // Isolated dynamic groups, in the order of their roots. Momentum is exchanged in equal and
-  // opposite impulses, so it is kept; the mass-weighted centre is kept where every body has
-  // one contact (an isolated pair): elsewhere the per-body averaging moves it by design.
-  std::sort(groups.begin(), groups.end(), [](const GroupFigures& x, const GroupFigures& y) { return x.root < y.root; });
-  for (const GroupFigures& gr : groups) {
+  // Isolated dynamic groups, in island order. Momentum is exchanged in equal and opposite
+  // impulses, so it is kept; the mass-weighted centre is kept where every body has one
+  // contact (an isolated pair): elsewhere the per-body averaging moves it by design.
+  for (std::size_t j = 0; j < islands; ++j) {
+    if (!s.isolated[j]) continue;
+    const GroupFigures& gr = s.group_figures[j];
     s.group_momentum.check(gr.dp <= gr.bound, gr.dp / gr.bound, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
                          "{:.3g} kg m/s (exchanged {:.3g}, bound {:.3g})",

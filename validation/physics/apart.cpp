@@ -157,7 +157,7 @@ std::uint64_t PhysicsValidators::Impl::open_near_groups(ContactGraph& graph) con
       if (graph.statics[r]) continue;
       graph.statics[r] = 1;  // an unreported contact may join it to another body
       const std::size_t gi = graph.group_of(r);
-      if (gi < graph.groups.size() && graph.groups[gi].second.size() >= 2) ++opened;
+      if (gi < graph.groups() && graph.members.size(gi) >= 2) ++opened;
     }
   }
   return opened;

@@ -80,7 +80,7 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
     if (near.frame == frame)
       groups_near += open_near_groups(graph);
     else
-      for (auto& group : graph.groups) graph.statics[group.first] = 1;  // no states: nothing shown apart
+      for (const std::uint32_t root : graph.roots) graph.statics[root] = 1;  // no states: nothing shown apart
   }
   const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
@@ -93,40 +93,51 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // exactly (p_a - p_b) x J: summed per group into the expected change (witness_turn), it
   // leaves open only the friction impulse a record without jt3 gives as a scalar
   // (|p_a - p_b| |jt|) and the points' float32 rounding.
-  std::vector<double> witness_torque(graph.groups.size(), 0.0);  // per group
-  std::vector<D3> witness_turn(graph.groups.size(), D3{});
+  std::vector<double> witness_torque(graph.groups(), 0.0);  // per group
+  std::vector<D3> witness_turn(graph.groups(), D3{});
   const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
   const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
   const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
-  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
-    const ContactRecord& c = rec.contacts[k];
-    if (!dynamic(c.pair.a) || !dynamic(c.pair.b)) continue;
-    // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
-    // momentum-balance) + friction_cone_abs.
-    const double jt = normal_only
-                          ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
-                          : std::fabs(double(c.jt));
-    if (two_points) {
-      const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
-      const D3 nrm = d3(c.normal);
-      const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
-      const std::size_t gi = graph.group_index[c.pair.a];  // a dynamic body of a row: a member
-      witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
-      witness_torque[gi] += vector_friction ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
-                                              : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
-      continue;
+  // Each group's rows between two dynamic bodies, in row order (group_items), summed per
+  // group on the threads: the same sums as one pass over the rows in order.
+  GroupScratch row_scratch;
+  GroupedItems group_rows;
+  group_items(
+      rec.contacts.size(), graph.groups(), loop_threads(threads, rec.contacts.size(), kParallelComponentsFrom), stop,
+      [&](std::size_t k) {
+        const Pair q = rec.contacts[k].pair;
+        return dynamic(q.a) && dynamic(q.b) ? std::size_t(graph.group_index[q.a])  // a member
+                                            : graph.groups();
+      },
+      row_scratch, group_rows);
+  parallel_items_on(graph.groups(), loop_threads(threads, graph.groups(), kParallelComponentsFrom), stop,
+                    [&](std::size_t gi, unsigned) {
+    for (const std::uint32_t k : group_rows.group(gi)) {
+      const ContactRecord& c = rec.contacts[k];
+      // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
+      // momentum-balance) + friction_cone_abs.
+      const double jt = normal_only
+                            ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
+                            : std::fabs(double(c.jt));
+      if (two_points) {
+        const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
+        const D3 nrm = d3(c.normal);
+        const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
+        witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
+        witness_torque[gi] += vector_friction
+                                  ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
+                                  : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
+        continue;
+      }
+      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
+      witness_torque[gi] += (double(c.depth) + pair_margin(c.pair)) * j;
     }
-    const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
-    witness_torque[graph.group_index[c.pair.a]] += (double(c.depth) + pair_margin(c.pair)) * j;
-  }
+  });
   // The isolated groups, judged on the threads and tallied in group order (judge_in_order).
   auto judge_groups = [&](std::size_t first, std::size_t last, auto& s, auto& momentum, auto& energy, auto& angular) {
     for (std::size_t gi = first; gi < last; ++gi) {
-      const auto& group = graph.groups[gi];
-      // Not a structured binding: lambdas below capture it (clang 14, the fuzz preset's
-      // compiler, refuses to capture structured bindings before C++20).
-      const std::uint32_t root = group.first;
-      const std::vector<std::uint32_t>& members = group.second;
+      const std::uint32_t root = graph.roots[gi];
+      const BodyList members = graph.group(gi);
       if (statics[root] || members.size() < 2) continue;
       if (bodies.velocity_clamp > 0.0 &&
           std::any_of(members.begin(), members.end(), [&](std::uint32_t i) {
@@ -261,15 +272,15 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       });
     }
   };
-  judge_in_order<IsolatedGroupDry>(graph.groups.size(), threads, kParallelIsolatedGroupsFrom, stop, *this,
+  judge_in_order<IsolatedGroupDry>(graph.groups(), threads, kParallelIsolatedGroupsFrom, stop, *this,
                                    std::array<Tally*, 3>{&momentum_tally, &energy_tally, &angular_tally}, judge_groups);
   if (tracks_episodes()) soft_episodes(rec, components(graph));
   rigid_rises_spared += rigid_rises_now.size();  // in no episode (none tracked)
   rigid_rises_now.clear();
 }
 
-PhysicsValidators::Impl::StepEnergy PhysicsValidators::Impl::step_energy(
-    const FrameRecord& rec, const std::vector<std::uint32_t>& members) const {
+PhysicsValidators::Impl::StepEnergy PhysicsValidators::Impl::step_energy(const FrameRecord& rec,
+                                                                        BodyList members) const {
   const std::size_t n = model->bodies.size();
   const D3 g = d3(model->scene.gravity);
   const double dt = model->scene.dt;
@@ -291,32 +302,31 @@ PhysicsValidators::Impl::StepEnergy PhysicsValidators::Impl::step_energy(
   return s;
 }
 
-std::uint32_t PhysicsValidators::Impl::ContactGraph::find(std::uint32_t i) {
-  while (parent[i] != i) i = parent[i] = parent[parent[i]];
-  return i;
-}
-
 PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(const FrameRecord& rec) const {
   const std::size_t n = model->bodies.size();
   ContactGraph graph;
-  std::vector<std::uint32_t>& parent = graph.parent;
-  parent.resize(n);
-  for (std::size_t i = 0; i < n; ++i) parent[i] = static_cast<std::uint32_t>(i);
-  auto find = [&](std::uint32_t i) { return graph.find(i); };
+  const unsigned body_threads = loop_threads(threads, n, kParallelComponentsFrom);
+  const unsigned link_threads =
+      loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelComponentsFrom);
   // The contact graph: the contact rows' pairs and the engine's confirmed pairs (octocd's
   // later relaxation passes may resolve a confirmed pair that the first pass's Eq. 9
-  // discarded, so its impulses are in the state but not in the rows).
-  // Both lists read in place, the rows' pairs first.
-  std::vector<std::uint8_t> touched(n, 0);
-  graph.statics.assign(n, 0);
-  auto join = [&](const Pair& q) {
-    parent[find(q.a)] = find(q.b);
-    touched[q.a] = touched[q.b] = 1;
-  };
-  for (const ContactRecord& c : rec.contacts) join(c.pair);
-  for (const Pair& q : rec.confirmed) join(q);
+  // discarded, so its impulses are in the state but not in the rows), joined on the threads
+  // (components.hpp: the same roots whatever the threads' order), each body of a pair
+  // marked as touched.
+  graph.components.reset(n, body_threads, stop);
+  for (const bool rows : {true, false}) {
+    const std::size_t count = rows ? rec.contacts.size() : rec.confirmed.size();
+    graph.components.join_all(count, link_threads, stop, [](std::size_t) { return true; }, [&](std::size_t k) {
+      const Pair q = rows ? rec.contacts[k].pair : rec.confirmed[k];
+      graph.components.mark(q.a);
+      graph.components.mark(q.b);
+      return q;
+    });
+  }
+  graph.components.settle(body_threads, stop);
   // The links with a static body (selected on the threads), their roots marked.
   std::vector<Pair> with_static;
+  graph.statics.assign(n, 0);
   const unsigned select_threads = loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelSelectFrom);
   for (const bool rows : {true, false}) {
     const std::size_t count = rows ? rec.contacts.size() : rec.confirmed.size();
@@ -328,40 +338,48 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
           return !dynamic(q.a) || !dynamic(q.b);
         },
         link);
-    for (const Pair& q : with_static) graph.statics[find(q.a)] = 1;
+    for (const Pair& q : with_static) graph.statics[graph.find(q.a)] = 1;
   }
-  // The groups read off the dynamic bodies touched: roots ascending, each group's bodies
-  // ascending, in passes over the bodies in order (no sort). group_index first counts each
-  // root's bodies, then holds each root's group and each member's.
-  std::vector<std::uint32_t>& group_index = graph.group_index;
-  group_index.assign(n, 0);
-  auto member = [&](std::size_t i) { return touched[i] && dynamic(static_cast<std::uint32_t>(i)); };
-  for (std::size_t i = 0; i < n; ++i)
-    if (member(i)) ++group_index[find(static_cast<std::uint32_t>(i))];
-  for (std::size_t r = 0; r < n; ++r) {
-    if (!group_index[r]) continue;
-    graph.groups.emplace_back(static_cast<std::uint32_t>(r), std::vector<std::uint32_t>{});
-    graph.groups.back().second.reserve(group_index[r]);
-    group_index[r] = static_cast<std::uint32_t>(graph.groups.size() - 1);
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!member(i)) continue;
-    const std::uint32_t gi = group_index[find(static_cast<std::uint32_t>(i))];
-    graph.groups[gi].second.push_back(static_cast<std::uint32_t>(i));
-    group_index[i] = gi;
-  }
+  // The groups: the dynamic bodies touched, gathered by root (components.hpp's group_items:
+  // roots ascending, each root's bodies ascending), then the roots with bodies numbered.
+  GroupScratch scratch;
+  GroupedItems by_root;
+  group_items(
+      n, n, body_threads, stop,
+      [&](std::size_t i) {
+        const auto u = static_cast<std::uint32_t>(i);
+        return graph.components.marked(u) && dynamic(u) ? std::size_t(graph.find(u)) : n;
+      },
+      scratch, by_root);
+  parallel_select(
+      n, graph.roots, body_threads, stop, [&](std::size_t r) { return by_root.size(r) > 0; },
+      [](std::size_t r) { return static_cast<std::uint32_t>(r); });
+  const std::size_t group_count = graph.roots.size();
+  graph.members.items = std::move(by_root.items);
+  graph.members.first.resize(group_count + 1);
+  graph.members.first[group_count] = graph.members.items.size();
+  graph.group_index.resize(n);
+  const unsigned group_threads = loop_threads(threads, group_count, kParallelComponentsFrom);
+  parallel_items_on(group_count, group_threads, stop, [&](std::size_t g, unsigned) {
+    const std::size_t first = by_root.first[graph.roots[g]];
+    graph.members.first[g] = first;
+    for (std::size_t k = first; k < by_root.first[graph.roots[g] + 1]; ++k)
+      graph.group_index[graph.members.items[k]] = static_cast<std::uint32_t>(g);
+  });
   return graph;
 }
 
 std::size_t PhysicsValidators::Impl::ContactGraph::group_of(std::uint32_t r) const {
-  const auto it = std::lower_bound(groups.begin(), groups.end(), r,
-                                   [](const auto& group, std::uint32_t root) { return group.first < root; });
-  return it != groups.end() && it->first == r ? std::size_t(it - groups.begin()) : groups.size();
+  const auto it = std::lower_bound(roots.begin(), roots.end(), r);
+  return it != roots.end() && *it == r ? std::size_t(it - roots.begin()) : roots.size();
 }
 
 std::vector<PhysicsValidators::Impl::Component> PhysicsValidators::Impl::components(const ContactGraph& graph) const {
   std::vector<Component> out;  // this step's, with their dynamic bodies
-  for (const auto& group : graph.groups) out.push_back({group.second, !graph.statics[group.first]});
+  for (std::size_t g = 0; g < graph.groups(); ++g) {
+    const BodyList members = graph.group(g);
+    out.push_back({std::vector<std::uint32_t>(members.begin(), members.end()), !graph.statics[graph.roots[g]]});
+  }
   return out;
 }
 

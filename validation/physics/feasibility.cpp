@@ -109,15 +109,6 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const std::vector<Pair>& cand = shared ? shared->work.reach_cand : st.cand;
 
   // Each pair within reach: its contact points and normal.
-  std::vector<std::uint32_t>& parent = st.parent;
-  parent.resize(n);
-  std::iota(parent.begin(), parent.end(), 0u);
-  auto find = [&](std::uint32_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  std::vector<std::uint8_t>& touched = st.touched;
-  touched.assign(n, 0);
   // Each candidate pair's contact points on `threads` threads, each into its own slot.
   std::vector<PairContacts>& pair_out = st.pair_out;
   pair_out.resize(cand.size());
@@ -175,76 +166,67 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       cand.size(), with_contacts, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
       [&](std::size_t ci) { return !pair_out[ci].contacts.empty(); }, [](std::size_t ci) { return ci; });
   st.pairs += with_contacts.size();
-  for (const std::size_t ci : with_contacts) {
-    const Pair p = cand[ci];
-    if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
-    touched[p.a] = touched[p.b] = 1;
-  }
-  // The dynamic bodies touched, ascending: a scan of the n flags.
+  // The bodies of the pairs with contacts marked, those between dynamic bodies joined, on
+  // `threads` threads (components.hpp: each root its island's lowest body, whatever the
+  // threads' order); then each body's root.
+  Components& components = st.components;
+  components.reset(n, loop_threads(threads, n, kParallelIndexFrom), stop);
+  components.join_all(
+      with_contacts.size(), loop_threads(threads, with_contacts.size(), kParallelIndexFrom), stop,
+      [&](std::size_t k) {
+        const Pair p = cand[with_contacts[k]];
+        components.mark(p.a);
+        components.mark(p.b);
+        return dynamic(p.a) && dynamic(p.b);
+      },
+      [&](std::size_t k) { return cand[with_contacts[k]]; });
+  components.settle(loop_threads(threads, n, kParallelIndexFrom), stop);
+  const std::vector<std::uint32_t>& root = components.roots();
+  // The dynamic bodies touched, ascending: a scan of the n marks.
   parallel_select(
       n, bodies_touched, loop_threads(threads, n, kParallelSelectFrom), stop,
-      [&](std::size_t i) { return touched[i] && dynamic(static_cast<std::uint32_t>(i)); },
+      [&](std::size_t i) {
+        const auto u = static_cast<std::uint32_t>(i);
+        return components.marked(u) && dynamic(u);
+      },
       [](std::size_t i) { return static_cast<std::uint32_t>(i); });
 
   // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
-  // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),
-  // each island's bodies ascending (the programme finds a body's slot by bisection); read
-  // off the bodies touched. A root is a dynamic body touched that is its own parent (unions
-  // join dynamic bodies only), so the roots come out ascending from the bodies touched.
-  // Each body's root: on `threads` threads where the path is short (the parents only
-  // read), else on this thread with path halving; then each body touched points at its
-  // root. The index's loops go to the threads from kParallelIndexFrom items.
-  constexpr std::uint32_t kNoRoot = 0xffffffffu;
-  constexpr int kShortPath = 8;
+  // order of their roots, their lowest bodies (a pair with contacts has a dynamic body:
+  // feasibility_contacts), each island's bodies ascending (the programme finds a body's
+  // slot by bisection); read off the bodies touched: a root is a body touched that is its
+  // own root, so the roots come out ascending. The index's loops go to the threads from
+  // kParallelIndexFrom items.
   std::vector<std::uint32_t>& roots = st.roots;
-  std::vector<std::uint32_t>& root_of = st.root_of;
-  roots.clear();
-  root_of.resize(bodies_touched.size());
-  const unsigned index_threads = loop_threads(threads, bodies_touched.size(), kParallelIndexFrom);
-  parallel_items_on(bodies_touched.size(), index_threads, stop, [&](std::size_t k, unsigned) {
-    std::uint32_t i = bodies_touched[k];
-    for (int step = 0; step < kShortPath && parent[i] != i; ++step) i = parent[i];
-    root_of[k] = parent[i] == i ? i : kNoRoot;
-  });
-  for (std::size_t k = 0; k < bodies_touched.size(); ++k) {
-    if (root_of[k] == kNoRoot) root_of[k] = find(bodies_touched[k]);
-    if (root_of[k] == bodies_touched[k]) roots.push_back(root_of[k]);
-  }
-  parallel_items_on(bodies_touched.size(), index_threads, stop,
-                    [&](std::size_t k, unsigned) { parent[bodies_touched[k]] = root_of[k]; });
+  parallel_select(
+      bodies_touched.size(), roots, loop_threads(threads, bodies_touched.size(), kParallelSelectFrom), stop,
+      [&](std::size_t k) { return root[bodies_touched[k]] == bodies_touched[k]; },
+      [&](std::size_t k) { return bodies_touched[k]; });
   std::vector<std::int32_t>& island_of = st.island_of;
   island_of.resize(n);
   parallel_items_on(roots.size(), loop_threads(threads, roots.size(), kParallelIndexFrom), stop,
                     [&](std::size_t ii, unsigned) { island_of[roots[ii]] = static_cast<std::int32_t>(ii); });
   // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
-  // flat lists: first[ii] .. first[ii + 1]; the items sorted by (island, item) on `threads`
-  // threads (the keys are distinct: the order of a stable counting sort by island).
-  std::vector<std::uint64_t>& keys = st.keys;
+  // flat lists: first[ii] .. first[ii + 1] (group_items: a stable counting sort by island,
+  // on `threads` threads).
   auto ranges = [&](std::size_t items, auto island_of_item, std::vector<std::size_t>& first, auto& flat, auto value) {
-    keys.resize(items);
-    parallel_items_on(items, loop_threads(threads, items, kParallelIndexFrom), stop, [&](std::size_t k, unsigned) {
-      keys[k] = (std::uint64_t(island_of_item(k)) << 32) | std::uint64_t(k);
-    });
-    if (!std::is_sorted(keys.begin(), keys.end()))  // sorted already: one island, or islands in item order
-      parallel_sort(keys, loop_threads(threads, items), std::less<std::uint64_t>());
-    first.assign(roots.size() + 1, 0);
+    group_items(items, roots.size(), loop_threads(threads, items, kParallelIndexFrom), stop, island_of_item,
+                st.group_scratch, st.grouped);
+    first.swap(st.grouped.first);
     flat.resize(items);
-    for (std::size_t j = 0; j < items; ++j) {
-      ++first[(keys[j] >> 32) + 1];
-      flat[j] = value(std::size_t(keys[j] & 0xffffffffu));
-    }
-    for (std::size_t ii = 0; ii < roots.size(); ++ii) first[ii + 1] += first[ii];
+    parallel_items_on(items, loop_threads(threads, items, kParallelIndexFrom), stop,
+                      [&](std::size_t j, unsigned) { flat[j] = value(std::size_t(st.grouped.items[j])); });
   };
   std::vector<std::size_t>& member_first = st.member_first;
   std::vector<std::size_t>& pair_first = st.pair_first;
   std::vector<std::size_t>& pairs_flat = st.pairs_flat;
   std::vector<std::uint32_t>& members_flat = st.members_flat;
-  ranges(bodies_touched.size(), [&](std::size_t k) { return std::size_t(island_of[root_of[k]]); }, member_first,
-         members_flat, [&](std::size_t k) { return bodies_touched[k]; });
+  ranges(bodies_touched.size(), [&](std::size_t k) { return std::size_t(island_of[root[bodies_touched[k]]]); },
+         member_first, members_flat, [&](std::size_t k) { return bodies_touched[k]; });
   ranges(with_contacts.size(),
          [&](std::size_t k) {
            const Pair p = cand[with_contacts[k]];
-           return std::size_t(island_of[parent[dynamic(p.a) ? p.a : p.b]]);
+           return std::size_t(island_of[root[dynamic(p.a) ? p.a : p.b]]);
          },
          pair_first, pairs_flat, [&](std::size_t k) { return with_contacts[k]; });
   // Each island's bodies, and its contacts in candidate order copied only where it has at

@@ -127,10 +127,10 @@ struct FeasibilityState {
   std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
   /// exact_pairs' tables of the step's candidate search, kept from step to step.
   ExactPairsTables pair_tables;
-  /// The step's per-body tables (n entries each: union-find parents, bodies touched, each
-  /// root's island), rewritten every step in memory kept from step to step.
-  std::vector<std::uint32_t> parent;
-  std::vector<std::uint8_t> touched;
+  /// The step's per-body tables (n entries each: the contact graph's components and the
+  /// bodies touched, each root's island), rewritten every step in memory kept from step to
+  /// step.
+  Components components;
   std::vector<std::int32_t> island_of;
   /// The step's contacts per candidate pair, and each island's bodies and contacts, in
   /// memory kept from step to step (at 240,000 pairs a step, freeing their lists was about
@@ -140,16 +140,18 @@ struct FeasibilityState {
   std::vector<std::vector<Contact>> island_contacts;
   /// The step's reach (step_reach_boxes: each body's motion, world and grown boxes) and
   /// pairs within it where the checked frame does not hold them (a judge device's frames),
-  /// and the islands' index (the pairs with contacts, the bodies touched, their roots, the
-  /// sort keys, the ranges and lists of each island's bodies and pairs) and verdicts, in
+  /// and the islands' index (the pairs with contacts, the bodies touched, the islands'
+  /// roots, the grouping's scratch, the ranges and lists of each island's bodies and pairs)
+  /// and verdicts, in
   /// memory kept from step to step (at 10^6 bodies the boxes are 56 MB a step: fresh pages,
   /// zeroed on one thread, took longer than filling them on all).
   std::vector<double> motion;
   std::vector<Aabb> world, grown;
   std::vector<Pair> cand;
   std::vector<std::size_t> with_contacts, member_first, pair_first, pairs_flat;
-  std::vector<std::uint32_t> bodies_touched, roots, root_of, members_flat;
-  std::vector<std::uint64_t> keys;
+  std::vector<std::uint32_t> bodies_touched, roots, members_flat;
+  GroupScratch group_scratch;
+  GroupedItems grouped;
   std::vector<IslandVerdict> verdicts;
 };
 

@@ -50,6 +50,7 @@
 #include "octocd/exact_pairs.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/validation_rows.hpp"
+#include "../src/components.hpp"
 #include "dmath.hpp"
 #include "reference.hpp"
 #include "frame_array.hpp"
@@ -102,8 +103,24 @@ M3 inverse(const M3& m);
 std::string pair_name(Pair p);
 /// "body I".
 std::string body_name(std::size_t i);
+/// A borrowed list of body indices: a vector's or a flat list's range (a contact graph's
+/// group), valid while its storage is.
+struct BodyList {
+  const std::uint32_t* first = nullptr;
+  const std::uint32_t* last = nullptr;
+  BodyList() = default;
+  BodyList(const std::uint32_t* b, const std::uint32_t* e) : first(b), last(e) {}
+  BodyList(const std::vector<std::uint32_t>& v) : first(v.data()), last(v.data() + v.size()) {}  // NOLINT: a view
+  const std::uint32_t* begin() const { return first; }
+  const std::uint32_t* end() const { return last; }
+  std::size_t size() const { return std::size_t(last - first); }
+  bool empty() const { return first == last; }
+  std::uint32_t front() const { return *first; }
+  std::uint32_t operator[](std::size_t k) const { return first[k]; }
+};
+
 /// "group (I, J, K)": an isolated group by its first bodies (up to 3, then "...").
-std::string group_name(const std::vector<std::uint32_t>& members);
+std::string group_name(BodyList members);
 
 /// Where a judged item is: its frame and its name as expectations write it ("pair (A, B)",
 /// "body I", "group (I, J, K)"). A pair's, a body's or a group's name is written only when a
@@ -115,7 +132,7 @@ struct Where {
   std::string text;  ///< Kind::Text: the name ("" for none)
   Pair pair{};       ///< Kind::Pair
   std::size_t body = 0;  ///< Kind::Body
-  const std::vector<std::uint32_t>* members = nullptr;  ///< Kind::Group: borrowed for the check's call
+  BodyList members;      ///< Kind::Group: borrowed for the check's call
   Where() = default;
   Where(std::int64_t f, std::string name) : frame(f), text(std::move(name)) {}
   Where(std::int64_t f, Pair p) : frame(f), kind(Kind::Pair), pair(p) {}
@@ -128,18 +145,18 @@ struct Where {
   }
   /// An isolated group by its members (ascending), which must outlive the Tally::check
   /// the Where is given to.
-  static Where of_group(std::int64_t f, const std::vector<std::uint32_t>& m) {
+  static Where of_group(std::int64_t f, BodyList m) {
     Where w;
     w.frame = f;
     w.kind = Kind::Group;
-    w.members = &m;
+    w.members = m;
     return w;
   }
   /// The item's name: "pair (A, B)", "body I", "group (I, J, K)" or the text.
   std::string name() const {
     return kind == Kind::Pair    ? pair_name(pair)
            : kind == Kind::Body  ? body_name(body)
-           : kind == Kind::Group ? group_name(*members)
+           : kind == Kind::Group ? group_name(members)
                                  : text;
   }
 };
@@ -807,17 +824,24 @@ struct PhysicsValidators::Impl {
   void conservation(const FrameRecord& rec);
   /// Rows 7-8 on frames with states (balance.cpp).
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
-  /// A step's contact graph: the contact rows' and confirmed pairs joined (find), per
-  /// root whether a member touches a static body, and the groups: per root (ascending)
-  /// its dynamic bodies in contact (ascending).
+  /// A step's contact graph: the contact rows' and confirmed pairs joined (components.hpp:
+  /// each component named by its lowest body, statics included), per root whether a member
+  /// touches a static body, and the groups: the components with a dynamic body in contact,
+  /// in ascending order of their roots, each listing those dynamic bodies ascending.
   struct ContactGraph {
-    std::vector<std::uint32_t> parent;
-    std::vector<std::uint8_t> statics;
-    std::vector<std::pair<std::uint32_t, std::vector<std::uint32_t>>> groups;
-    /// Per body: the index in `groups` of its group (read for the groups' members only).
+    Components components;
+    std::vector<std::uint8_t> statics;  ///< per root: 1 where it touches a static body
+    std::vector<std::uint32_t> roots;   ///< per group: its root
+    GroupedItems members;               ///< per group: its dynamic bodies in contact
+    /// Per body: the index of its group (read for the groups' members only).
     std::vector<std::uint32_t> group_index;
-    std::uint32_t find(std::uint32_t i);
-    /// The index in `groups` of root r's group, or groups.size() when r has none.
+    /// Body i's root (its component's lowest body).
+    std::uint32_t find(std::uint32_t i) const { return components.root(i); }
+    /// The group count.
+    std::size_t groups() const { return roots.size(); }
+    /// Group g's dynamic bodies, ascending.
+    physics_detail::BodyList group(std::size_t g) const { return {members.begin(g), members.end(g)}; }
+    /// The index of root r's group, or groups() when r has none.
     std::size_t group_of(std::uint32_t r) const;
   };
   ContactGraph contact_graph(const FrameRecord& rec) const;
@@ -875,7 +899,7 @@ struct PhysicsValidators::Impl {
     double ke0 = 0, ke1 = 0, bound = 0;
     bool rose = false;
   };
-  StepEnergy step_energy(const FrameRecord& rec, const std::vector<std::uint32_t>& members) const;
+  StepEnergy step_energy(const FrameRecord& rec, physics_detail::BodyList members) const;
   std::vector<Episode> episodes;  // contact_model soft: open episodes
   /// The pairs of dynamic bodies with a contact row in frame `pairs_frame` (the last frame
   /// soft_episodes saw; 0: none yet, the state before frame 1), sorted.

@@ -118,7 +118,7 @@ M3 inverse(const M3& m) {
 
 std::string pair_name(Pair p) { return fmt::format("pair ({}, {})", p.a, p.b); }
 std::string body_name(std::size_t i) { return fmt::format("body {}", i); }
-std::string group_name(const std::vector<std::uint32_t>& members) {
+std::string group_name(BodyList members) {
   std::string s = "group (";
   for (std::size_t k = 0; k < members.size() && k < 3; ++k) s += (k ? ", " : "") + std::to_string(members[k]);
   return s + (members.size() > 3 ? ", ...)" : ")");
