@@ -758,20 +758,23 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   s.v_int.resize(n);
   s.xf_int.resize(n);
   s.vf_int.resize(n);
-  parallel_items_on(n, loop_threads(s.threads, n, kParallelIntegrateFrom), s.stop, [&](std::size_t i, unsigned) {
-    D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
-    F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
-    if (w[i] > 0.0f)
-      for (int k = 0; k < 3; ++k) {
-        v[k] = v[k] + dt * sc.gravity[k];
-        x[k] = x[k] + dt * v[k];
-        vf[k] = vf[k] + sc.dt * sc.gravity[k];
-        xf[k] = xf[k] + sc.dt * vf[k];
-      }
-    s.x_int[i] = x;
-    s.v_int[i] = v;
-    s.xf_int[i] = xf;
-    s.vf_int[i] = vf;
+  const unsigned integrate_threads = loop_threads(s.threads, n, kParallelIntegrateFrom);
+  parallel_ranges(n, integrate_threads, s.stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t i = first; i < last; ++i) {
+      D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
+      F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
+      if (w[i] > 0.0f)
+        for (int k = 0; k < 3; ++k) {
+          v[k] = v[k] + dt * sc.gravity[k];
+          x[k] = x[k] + dt * v[k];
+          vf[k] = vf[k] + sc.dt * sc.gravity[k];
+          xf[k] = xf[k] + sc.dt * vf[k];
+        }
+      s.x_int[i] = x;
+      s.v_int[i] = v;
+      s.xf_int[i] = xf;
+      s.vf_int[i] = vf;
+    }
   });
 
   // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
@@ -799,14 +802,16 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   s.dyn_start.resize(islands + 1);
   s.dyn_start[islands] = static_cast<std::uint32_t>(s.by_root.items.size());
   s.slot.resize(n);
-  parallel_items_on(islands, loop_threads(s.threads, islands, kParallelIntegrateFrom), s.stop,
-                    [&](std::size_t j, unsigned) {
-    const std::uint32_t r = s.firsts[j];
-    s.island_of[r] = static_cast<std::int32_t>(j);
-    const std::size_t first = s.by_root.first[r];
-    s.dyn_start[j] = static_cast<std::uint32_t>(first);
-    for (std::size_t k = first; k < s.by_root.first[r + 1]; ++k)
-      s.slot[s.by_root.items[k]] = static_cast<std::uint32_t>(k - first);
+  parallel_ranges(islands, loop_threads(s.threads, islands, kParallelIntegrateFrom), s.stop,
+                  [&](std::size_t first_island, std::size_t last_island) {
+    for (std::size_t j = first_island; j < last_island; ++j) {
+      const std::uint32_t r = s.firsts[j];
+      s.island_of[r] = static_cast<std::int32_t>(j);
+      const std::size_t first = s.by_root.first[r];
+      s.dyn_start[j] = static_cast<std::uint32_t>(first);
+      for (std::size_t k = first; k < s.by_root.first[r + 1]; ++k)
+        s.slot[s.by_root.items[k]] = static_cast<std::uint32_t>(k - first);
+    }
   });
   const std::vector<std::uint32_t>& dyn = s.by_root.items;  // island j's: dyn[dyn_start[j] .. dyn_start[j + 1])
   auto island_of_contact = [&](const Pair& q) {

@@ -131,7 +131,8 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   });
   std::vector<Pair> cand;
   reach_pairs(grown, cand, near_tables);
-  ContactGraph graph = contact_graph(rec);
+  ContactGraph graph;
+  contact_graph(rec, graph);
   const bool whole = incomplete_whole_step(rec.frame);
   // reach_pairs: a body of every pair is dynamic.
   for (const Pair& p : cand) {

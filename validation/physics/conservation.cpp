@@ -72,7 +72,9 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
 
   // 6. Conservation on isolated dynamic groups: components of the contact graph with at
   // least 2 dynamic bodies and no static body among their contacts.
-  ContactGraph graph = contact_graph(rec);
+  ConservationMemory& memory = conservation_memory;
+  ContactGraph& graph = memory.graph;
+  contact_graph(rec, graph);
   // A step that may lack rows (contacts_complete 0, /contacts/incomplete): a group near a
   // body outside it (of a pair that may lack rows) may exchange an unreported impulse with
   // it; judged as touching a static body (apart.cpp). One apart from every such body is judged.
@@ -93,15 +95,16 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // exactly (p_a - p_b) x J: summed per group into the expected change (witness_turn), it
   // leaves open only the friction impulse a record without jt3 gives as a scalar
   // (|p_a - p_b| |jt|) and the points' float32 rounding.
-  std::vector<double> witness_torque(graph.groups(), 0.0);  // per group
-  std::vector<D3> witness_turn(graph.groups(), D3{});
+  std::vector<double>& witness_torque = memory.witness_torque;  // per group
+  std::vector<D3>& witness_turn = memory.witness_turn;
+  witness_torque.resize(graph.groups());
+  witness_turn.resize(graph.groups());
   const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
   const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
   const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
   // Each group's rows between two dynamic bodies, in row order (group_items), summed per
   // group on the threads: the same sums as one pass over the rows in order.
-  GroupScratch row_scratch;
-  GroupedItems group_rows;
+  GroupedItems& group_rows = memory.group_rows;
   group_items(
       rec.contacts.size(), graph.groups(), loop_threads(threads, rec.contacts.size(), kParallelComponentsFrom), stop,
       [&](std::size_t k) {
@@ -109,28 +112,33 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
         return dynamic(q.a) && dynamic(q.b) ? std::size_t(graph.group_index[q.a])  // a member
                                             : graph.groups();
       },
-      row_scratch, group_rows);
-  parallel_items_on(graph.groups(), loop_threads(threads, graph.groups(), kParallelComponentsFrom), stop,
-                    [&](std::size_t gi, unsigned) {
-    for (const std::uint32_t k : group_rows.group(gi)) {
-      const ContactRecord& c = rec.contacts[k];
-      // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
-      // momentum-balance) + friction_cone_abs.
-      const double jt = normal_only
-                            ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
-                            : std::fabs(double(c.jt));
-      if (two_points) {
-        const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
-        const D3 nrm = d3(c.normal);
-        const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
-        witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
-        witness_torque[gi] += vector_friction
-                                  ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
-                                  : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
-        continue;
+      memory.scratch, group_rows);
+  parallel_ranges(graph.groups(), loop_threads(threads, graph.groups(), kParallelComponentsFrom), stop,
+                  [&](std::size_t first, std::size_t last) {
+    for (std::size_t gi = first; gi < last; ++gi) {
+      witness_torque[gi] = 0.0;
+      witness_turn[gi] = D3{};
+      for (const std::uint32_t k : group_rows.group(gi)) {
+        const ContactRecord& c = rec.contacts[k];
+        // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
+        // momentum-balance) + friction_cone_abs.
+        const double jt = normal_only
+                              ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) +
+                                    tol.friction_cone_abs
+                              : std::fabs(double(c.jt));
+        if (two_points) {
+          const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
+          const D3 nrm = d3(c.normal);
+          const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
+          witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
+          witness_torque[gi] += vector_friction
+                                    ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
+                                    : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
+          continue;
+        }
+        const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
+        witness_torque[gi] += (double(c.depth) + pair_margin(c.pair)) * j;
       }
-      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
-      witness_torque[gi] += (double(c.depth) + pair_margin(c.pair)) * j;
     }
   });
   // The isolated groups, judged on the threads and tallied in group order (judge_in_order).
@@ -302,9 +310,8 @@ PhysicsValidators::Impl::StepEnergy PhysicsValidators::Impl::step_energy(const F
   return s;
 }
 
-PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(const FrameRecord& rec) const {
+void PhysicsValidators::Impl::contact_graph(const FrameRecord& rec, ContactGraph& graph) const {
   const std::size_t n = model->bodies.size();
-  ContactGraph graph;
   const unsigned body_threads = loop_threads(threads, n, kParallelComponentsFrom);
   const unsigned link_threads =
       loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelComponentsFrom);
@@ -326,7 +333,10 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   graph.components.settle(body_threads, stop);
   // The links with a static body (selected on the threads), their roots marked.
   std::vector<Pair> with_static;
-  graph.statics.assign(n, 0);
+  graph.statics.resize(n);
+  parallel_ranges(n, body_threads, stop, [&](std::size_t first, std::size_t last) {
+    std::fill(graph.statics.begin() + std::ptrdiff_t(first), graph.statics.begin() + std::ptrdiff_t(last), 0);
+  });
   const unsigned select_threads = loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelSelectFrom);
   for (const bool rows : {true, false}) {
     const std::size_t count = rows ? rec.contacts.size() : rec.confirmed.size();
@@ -342,31 +352,31 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   }
   // The groups: the dynamic bodies touched, gathered by root (components.hpp's group_items:
   // roots ascending, each root's bodies ascending), then the roots with bodies numbered.
-  GroupScratch scratch;
-  GroupedItems by_root;
+  GroupedItems& by_root = graph.by_root;
   group_items(
       n, n, body_threads, stop,
       [&](std::size_t i) {
         const auto u = static_cast<std::uint32_t>(i);
         return graph.components.marked(u) && dynamic(u) ? std::size_t(graph.find(u)) : n;
       },
-      scratch, by_root);
+      graph.scratch, by_root);
   parallel_select(
       n, graph.roots, body_threads, stop, [&](std::size_t r) { return by_root.size(r) > 0; },
       [](std::size_t r) { return static_cast<std::uint32_t>(r); });
   const std::size_t group_count = graph.roots.size();
-  graph.members.items = std::move(by_root.items);
+  graph.members.items.swap(by_root.items);
   graph.members.first.resize(group_count + 1);
   graph.members.first[group_count] = graph.members.items.size();
   graph.group_index.resize(n);
   const unsigned group_threads = loop_threads(threads, group_count, kParallelComponentsFrom);
-  parallel_items_on(group_count, group_threads, stop, [&](std::size_t g, unsigned) {
-    const std::size_t first = by_root.first[graph.roots[g]];
-    graph.members.first[g] = first;
-    for (std::size_t k = first; k < by_root.first[graph.roots[g] + 1]; ++k)
-      graph.group_index[graph.members.items[k]] = static_cast<std::uint32_t>(g);
+  parallel_ranges(group_count, group_threads, stop, [&](std::size_t first_group, std::size_t last_group) {
+    for (std::size_t g = first_group; g < last_group; ++g) {
+      const std::size_t first = by_root.first[graph.roots[g]];
+      graph.members.first[g] = first;
+      for (std::size_t k = first; k < by_root.first[graph.roots[g] + 1]; ++k)
+        graph.group_index[graph.members.items[k]] = static_cast<std::uint32_t>(g);
+    }
   });
-  return graph;
 }
 
 std::size_t PhysicsValidators::Impl::ContactGraph::group_of(std::uint32_t r) const {
@@ -392,7 +402,8 @@ void PhysicsValidators::Impl::advance_episodes(const FrameRecord& rec) {
     for (auto& e : episodes) e.spoiled = true;  // as conservation(): the episode is not seen whole
     return;
   }
-  ContactGraph graph = contact_graph(rec);
+  ContactGraph graph;
+  contact_graph(rec, graph);
   if (incomplete_step(rec.frame)) {  // as conservation() opens them
     find_near(rec);
     open_near_groups(graph);

@@ -214,8 +214,11 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
                 st.group_scratch, st.grouped);
     first.swap(st.grouped.first);
     flat.resize(items);
-    parallel_items_on(items, loop_threads(threads, items, kParallelIndexFrom), stop,
-                      [&](std::size_t j, unsigned) { flat[j] = value(std::size_t(st.grouped.items[j])); });
+    parallel_ranges(items, loop_threads(threads, items, kParallelIndexFrom), stop,
+                    [&](std::size_t first_item, std::size_t last_item) {
+                      for (std::size_t j = first_item; j < last_item; ++j)
+                        flat[j] = value(std::size_t(st.grouped.items[j]));
+                    });
   };
   std::vector<std::size_t>& member_first = st.member_first;
   std::vector<std::size_t>& pair_first = st.pair_first;

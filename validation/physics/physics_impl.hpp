@@ -843,8 +843,21 @@ struct PhysicsValidators::Impl {
     physics_detail::BodyList group(std::size_t g) const { return {members.begin(g), members.end(g)}; }
     /// The index of root r's group, or groups() when r has none.
     std::size_t group_of(std::uint32_t r) const;
+    /// The grouping's scratch and its groups per root (every body a root of its own).
+    GroupScratch scratch;
+    GroupedItems by_root;
   };
-  ContactGraph contact_graph(const FrameRecord& rec) const;
+  /// Fills `graph` with rec's contact graph, in the memory it holds (a previous step's).
+  void contact_graph(const FrameRecord& rec, ContactGraph& graph) const;
+  /// Conservation's graph and per-group sums, kept from step to step (at 10^6 bodies fresh
+  /// pages for them each step cost more than the passes that fill them).
+  struct ConservationMemory {
+    ContactGraph graph;
+    GroupScratch scratch;
+    GroupedItems group_rows;
+    std::vector<double> witness_torque;
+    std::vector<D3> witness_turn;
+  } conservation_memory;
   /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
   double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
   /// A step's component of the contact graph: its dynamic bodies (sorted) and whether it

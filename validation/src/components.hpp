@@ -49,9 +49,11 @@ class Components {
       capacity_ = n;
     }
     n_ = n;
-    parallel_items_on(n, n >= kParallelComponentsFrom ? threads : 1u, stop, [&](std::size_t i, unsigned) {
-      parent_[i].store(std::uint32_t(i), std::memory_order_relaxed);
-      marked_[i].store(0, std::memory_order_relaxed);
+    parallel_ranges(n, n >= kParallelComponentsFrom ? threads : 1u, stop, [&](std::size_t first, std::size_t last) {
+      for (std::size_t i = first; i < last; ++i) {
+        parent_[i].store(std::uint32_t(i), std::memory_order_relaxed);
+        marked_[i].store(0, std::memory_order_relaxed);
+      }
     });
   }
 
@@ -96,10 +98,13 @@ class Components {
   /// members a and b, called for the edges kept). ValidationStopped on a stop.
   template <class Keep, class Edge>
   void join_all(std::size_t edges, unsigned threads, const std::function<bool()>& stop, Keep&& keep, Edge&& edge) {
-    parallel_items_on(edges, edges >= kParallelComponentsFrom ? threads : 1u, stop, [&](std::size_t k, unsigned) {
-      if (!keep(k)) return;
-      const auto e = edge(k);
-      join(e.a, e.b);
+    const unsigned edge_threads = edges >= kParallelComponentsFrom ? threads : 1u;
+    parallel_ranges(edges, edge_threads, stop, [&](std::size_t first, std::size_t last) {
+      for (std::size_t k = first; k < last; ++k) {
+        if (!keep(k)) continue;
+        const auto e = edge(k);
+        join(e.a, e.b);
+      }
     });
   }
 
@@ -109,8 +114,9 @@ class Components {
   /// another thread has just settled. ValidationStopped on a stop.
   void settle(unsigned threads, const std::function<bool()>& stop) {
     root_.resize(n_);
-    parallel_items_on(n_, n_ >= kParallelComponentsFrom ? threads : 1u, stop,
-                      [&](std::size_t i, unsigned) { root_[i] = find(std::uint32_t(i)); });
+    parallel_ranges(n_, n_ >= kParallelComponentsFrom ? threads : 1u, stop, [&](std::size_t first, std::size_t last) {
+      for (std::size_t i = first; i < last; ++i) root_[i] = find(std::uint32_t(i));
+    });
   }
 
   /// Node i's root after settle() (its component's lowest node).
@@ -169,16 +175,19 @@ void group_items(std::size_t n, std::size_t groups, unsigned threads, const std:
   std::atomic<std::uint32_t>* const count = scratch.count.get();
   const unsigned item_threads = n >= kParallelComponentsFrom ? threads : 1u;
   const unsigned group_threads = groups >= kParallelComponentsFrom ? threads : 1u;
-  parallel_items_on(groups, group_threads, stop,
-                    [&](std::size_t g, unsigned) { count[g].store(0, std::memory_order_relaxed); });
-  parallel_items_on(n, item_threads, stop, [&](std::size_t k, unsigned) {
-    const std::size_t g = group(k);
-    if (g < groups) count[g].fetch_add(1, std::memory_order_relaxed);
+  parallel_ranges(groups, group_threads, stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t g = first; g < last; ++g) count[g].store(0, std::memory_order_relaxed);
+  });
+  parallel_ranges(n, item_threads, stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t k = first; k < last; ++k) {
+      const std::size_t g = group(k);
+      if (g < groups) count[g].fetch_add(1, std::memory_order_relaxed);
+    }
   });
   // Each group's first item: the counts summed per block of groups, the blocks' offsets in
   // order, then each block's groups from its offset; each count becomes its group's cursor.
   out.first.resize(groups + 1);
-  const std::size_t blocks = group_threads > 1 ? std::size_t(group_threads) * 8 : 1;
+  const std::size_t blocks = group_threads > 1 ? std::min<std::size_t>(groups, std::size_t(group_threads) * 8) : 1;
   std::vector<std::size_t> block_first(blocks + 1, 0);
   auto block_begin = [&](std::size_t b) { return groups * b / blocks; };
   parallel_items_on(blocks, group_threads, stop, [&](std::size_t b, unsigned) {
@@ -197,24 +206,34 @@ void group_items(std::size_t n, std::size_t groups, unsigned threads, const std:
   });
   out.first[groups] = block_first[blocks];
   out.items.resize(out.first[groups]);
-  parallel_items_on(n, item_threads, stop, [&](std::size_t k, unsigned) {
-    const std::size_t g = group(k);
-    if (g < groups) out.items[count[g].fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(k);
+  parallel_ranges(n, item_threads, stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t k = first; k < last; ++k) {
+      const std::size_t g = group(k);
+      if (g < groups) out.items[count[g].fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(k);
+    }
   });
-  // Each group in item order (the atomic cursors placed them in the threads' order).
+  // Each group in item order (the atomic cursors placed them in the threads' order): the
+  // groups of fewer than 4,096 items in each block of groups on the threads, the larger
+  // ones, listed per block, then each by parallel_sort.
   constexpr std::size_t kSortedOnTheTeamFrom = 4096;
   std::uint32_t* const items = out.items.data();
-  parallel_items_on(groups, group_threads, stop, [&](std::size_t g, unsigned) {
-    if (out.size(g) < kSortedOnTheTeamFrom && !std::is_sorted(items + out.first[g], items + out.first[g + 1]))
-      std::sort(items + out.first[g], items + out.first[g + 1]);
+  std::vector<std::vector<std::size_t>> big(blocks);
+  parallel_items_on(blocks, group_threads, stop, [&](std::size_t b, unsigned) {
+    for (std::size_t g = block_begin(b); g < block_begin(b + 1); ++g) {
+      if (std::is_sorted(items + out.first[g], items + out.first[g + 1])) continue;
+      if (out.size(g) < kSortedOnTheTeamFrom)
+        std::sort(items + out.first[g], items + out.first[g + 1]);
+      else
+        big[b].push_back(g);
+    }
   });
-  std::vector<std::uint32_t> big;
-  for (std::size_t g = 0; g < groups; ++g) {
-    if (out.size(g) < kSortedOnTheTeamFrom || std::is_sorted(out.begin(g), out.end(g))) continue;
-    big.assign(out.begin(g), out.end(g));
-    parallel_sort(big, threads, std::less<std::uint32_t>());
-    std::copy(big.begin(), big.end(), items + out.first[g]);
-  }
+  std::vector<std::uint32_t> sorted;
+  for (const std::vector<std::size_t>& list : big)
+    for (const std::size_t g : list) {
+      sorted.assign(out.begin(g), out.end(g));
+      parallel_sort(sorted, threads, std::less<std::uint32_t>());
+      std::copy(sorted.begin(), sorted.end(), items + out.first[g]);
+    }
 }
 
 }  // namespace octocd

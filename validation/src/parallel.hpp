@@ -49,6 +49,22 @@ void parallel_items(std::size_t n, int threads, const std::function<bool()>& sto
   parallel_items_on(n, loop_threads(threads, n), stop, std::forward<F>(body));
 }
 
+/// Calls body(first, last) for contiguous ranges that cover [0, n), about 8 a thread, on
+/// `threads` threads: for loops of cheap items (a few memory accesses each), where
+/// parallel_items_on's claims of at most 64 items cost more than the items (at 10^6 items
+/// and 16 threads, about 2 ms a pass). One thread: body(0, n). `stop` as parallel_items_on.
+template <class F>
+void parallel_ranges(std::size_t n, unsigned threads, const std::function<bool()>& stop, F&& body) {
+  if (threads <= 1 || n < 2) {
+    if (stop && stop()) throw ValidationStopped();
+    body(std::size_t(0), n);
+    return;
+  }
+  const std::size_t ranges = std::min<std::size_t>(n, std::size_t(threads) * 8);
+  parallel_items_on(ranges, threads, stop,
+                    [&](std::size_t r, unsigned) { body(n * r / ranges, n * (r + 1) / ranges); });
+}
+
 /// The fewest items parallel_select runs on threads (two passes of a few instructions an
 /// item: below this one thread costs less than waking another).
 constexpr std::size_t kParallelSelectFrom = 8192;
