@@ -33,12 +33,18 @@ inline unsigned loop_threads(int threads, std::size_t items, std::size_t serial_
 /// worker in [0, threads) names the thread, for per-thread scratch). The calling thread is
 /// worker 0 and polls `stop` (may be empty) between its chunks; a stop skips the items not
 /// started and throws ValidationStopped once every worker has left the loop. The first
-/// exception thrown by `body` is rethrown likewise.
+/// exception thrown by `body` is rethrown likewise. Items are claimed in chunks of about an
+/// eighth of a thread's share, at most 64 items up to 4,096 items a thread and a 64th of the
+/// share above.
 template <class F>
 void parallel_items_on(std::size_t n, unsigned threads, const std::function<bool()>& stop, F&& body) {
   LoopOptions o;
   o.threads = static_cast<int>(std::max(1u, threads));
-  o.chunk = threads <= 1 ? 16 : std::max<std::size_t>(1, std::min<std::size_t>(64, n / (threads * 8)));
+  // Items per claim: about an eighth of a thread's even share, at most 64 up to 64 x 64 items
+  // a thread, then a 64th of the share (a claim is one atomic add on a counter the threads
+  // share: at 10^6 cheap items and 16 threads, 64 a claim made 15,600 of them a pass).
+  const std::size_t share = n / std::max(1u, threads);
+  o.chunk = threads <= 1 ? 16 : std::max<std::size_t>(1, std::min(std::max<std::size_t>(64, share / 64), share / 8));
   o.stop = stop;
   if (!parallel_for(n, o, std::forward<F>(body))) throw ValidationStopped();
 }
