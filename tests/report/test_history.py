@@ -479,13 +479,19 @@ def test_a_stopped_history_report_says_so_in_one_line(tmp_path, long_history, th
     out, err = p.communicate(timeout=60)
     assert p.returncode == 143, (p.returncode, err)
     lines = err.strip().splitlines()
-    assert "Traceback" not in err and lines[:1] == [
-        "octocd report: stopped by SIGTERM; the earlier report (if any) is left as it was"], err
-    # octocd report adds no line of its own unless the script, having said its line, did not end
-    # within the stop bound (a loaded machine: cli/report.cpp kills it so the command ends within
-    # 1 s of the signal) and was killed, which it then says.
-    assert lines[1:] == [] or (through_octocd and len(lines) == 2 and lines[1].startswith(
-        "octocd: report stopped by SIGTERM; ") and "did not end within 700 ms and was killed" in lines[1]), err
+    said = "octocd report: stopped by SIGTERM; the earlier report (if any) is left as it was"
+
+    def killed(line):
+        return line.startswith("octocd: report stopped by SIGTERM; ") and \
+            "did not end within 700 ms and was killed" in line and "is left as it was" in line
+    assert "Traceback" not in err, err
+    # octocd report adds no line of its own unless the script did not end within the stop bound
+    # (a loaded machine: cli/report.cpp kills it so the command ends within 1 s of the signal) and
+    # was killed, which it then says: after the script's line, or alone where the script was
+    # killed before it could say it (on the 2-core VM busy with the other tests the script's
+    # handler can run later than the bound).
+    assert lines == [said] or (through_octocd and (lines[:1] == [said] and len(lines) == 2 and killed(lines[1])
+                                                   or len(lines) == 1 and killed(lines[0]))), err
     assert not os.path.exists(tmp_path / "out" / "index.html")
 
     def running(k):
