@@ -142,9 +142,8 @@ struct FeasibilityState {
   /// pairs within it where the checked frame does not hold them (a judge device's frames),
   /// and the islands' index (the pairs with contacts, the bodies touched, the islands'
   /// roots, the grouping's scratch, the ranges and lists of each island's bodies and pairs)
-  /// and verdicts, in
-  /// memory kept from step to step (at 10^6 bodies the boxes are 56 MB a step: fresh pages,
-  /// zeroed on one thread, took longer than filling them on all).
+  /// and verdicts, in memory kept from step to step (at 10^6 bodies the boxes are 56 MB a
+  /// step: fresh pages, zeroed on one thread, took longer than filling them on all).
   std::vector<double> motion;
   std::vector<Aabb> world, grown;
   std::vector<Pair> cand;

@@ -114,7 +114,6 @@ struct BodyList {
   const std::uint32_t* begin() const { return first; }
   const std::uint32_t* end() const { return last; }
   std::size_t size() const { return std::size_t(last - first); }
-  bool empty() const { return first == last; }
   std::uint32_t front() const { return *first; }
   std::uint32_t operator[](std::size_t k) const { return first[k]; }
 };

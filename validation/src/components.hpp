@@ -63,9 +63,6 @@ class Components {
   /// Whether node i was marked since reset() (read once the marking loop is done).
   bool marked(std::uint32_t i) const { return marked_[i].load(std::memory_order_relaxed) != 0; }
 
-  /// The number of nodes.
-  std::size_t size() const { return n_; }
-
   /// The root of node i (i < size()): its component's lowest node once every join is done.
   /// Safe beside other finds and joins on other threads (it shortens the path it walks).
   std::uint32_t find(std::uint32_t i) const {
@@ -163,8 +160,8 @@ struct GroupScratch {
 /// above for an item in no group): `out` holds each group's items ascending, the groups in
 /// ascending order (a stable counting sort by group), counted and placed on `threads`
 /// threads with atomic counters, then each group put in item order (groups of fewer than
-/// 4,096 items on the threads one group each, larger ones each by parallel_sort). Items
-/// are uint32. ValidationStopped on a stop.
+/// 4,096 items sorted on the threads, block by block of groups; larger ones each by
+/// parallel_sort). Items are uint32. ValidationStopped on a stop.
 template <class Group>
 void group_items(std::size_t n, std::size_t groups, unsigned threads, const std::function<bool()>& stop,
                  Group&& group, GroupScratch& scratch, GroupedItems& out) {

@@ -56,9 +56,10 @@ void parallel_items(std::size_t n, int threads, const std::function<bool()>& sto
 }
 
 /// Calls body(first, last) for contiguous ranges that cover [0, n), about 8 a thread, on
-/// `threads` threads: for loops of cheap items (a few memory accesses each), where
-/// parallel_items_on's claims of at most 64 items cost more than the items (at 10^6 items
-/// and 16 threads, about 2 ms a pass). One thread: body(0, n). `stop` as parallel_items_on.
+/// `threads` threads: for loops of cheap items (a few memory accesses each), where a call
+/// of the body per item and the claims cost more than the items (claims of 64 items made
+/// 15,600 atomic adds on one counter a pass at 10^6 items and 16 threads). One thread:
+/// body(0, n). `stop` as parallel_items_on, polled between ranges.
 template <class F>
 void parallel_ranges(std::size_t n, unsigned threads, const std::function<bool()>& stop, F&& body) {
   if (threads <= 1 || n < 2) {
