@@ -15,20 +15,31 @@
 
 #include "octocd/error.hpp"
 #include "octocd/loose_octree.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/strict_octree.hpp"
 
 namespace octocd {
 
 namespace detail {
 
-void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
-                std::vector<std::uint32_t>& count) {
+namespace {
+
+/// The fewest pairs whose sort runs on the worker team (octocd/parallel.hpp): below, the
+/// two counting passes on one thread cost less than waking others.
+constexpr std::size_t kParallelPairsFrom = 32768;
+
+/// The most buckets (and input chunks) of the parallel sort: its table of counts holds
+/// their product.
+constexpr std::size_t kMaxBuckets = 256;
+
+/// Runs of one `a` longer than this are sorted by b with std::sort, the others by
+/// insertion (most runs hold a few pairs, nearly in order).
+constexpr std::size_t kInsertionRunMax = 32;
+
+/// The serial sort: a stable counting sort by b, then by a (tmp: m pairs, count: n + 1).
+void sort_pairs_serial(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
+                       std::vector<std::uint32_t>& count) {
   const std::size_t m = pairs.size();
-  if (m < 2) return;
-  if (m < 64) {
-    std::sort(pairs.begin(), pairs.end());
-    return;
-  }
   tmp.resize(m);
   count.assign(n + 1, 0);
   // Pass 1: by b, pairs -> tmp.
@@ -40,6 +51,97 @@ void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
   for (const Pair& p : tmp) ++count[p.a + 1];
   for (std::size_t i = 1; i <= n; ++i) count[i] += count[i - 1];
   for (const Pair& p : tmp) pairs[count[p.a]++] = p;
+}
+
+}  // namespace
+
+void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
+                std::vector<std::uint32_t>& count, unsigned threads) {
+  const std::size_t m = pairs.size();
+  if (m < 2) return;
+  if (m < 64) {
+    std::sort(pairs.begin(), pairs.end());
+    return;
+  }
+  if (threads == 0) {
+    LoopOptions by_pairs;
+    by_pairs.min_items = kParallelPairsFrom;
+    threads = loop_threads(m, by_pairs);
+  }
+  if (threads <= 1 || n < 2) {
+    sort_pairs_serial(pairs, n, tmp, count);
+    return;
+  }
+  // Buckets of consecutive a: bucket(a) = a B / n, bucket b holding a in [lo(b), lo(b + 1))
+  // with lo(b) = ceil(b n / B). The input is cut into B chunks; each chunk's pairs go to
+  // tmp, bucket after bucket (chunk order within a bucket); then each bucket is put in
+  // order by a into its own range of `pairs` (a counting sort over its a, its counts in
+  // count[lo(b), lo(b + 1))), each a's run sorted by b. Every step on the team; the order is
+  // the one (a, b) order, whatever the thread count.
+  const std::size_t buckets = std::min<std::size_t>(std::size_t(threads) * 8, kMaxBuckets);
+  const auto bucket_of = [&](std::uint32_t a) {
+    return static_cast<std::size_t>(std::uint64_t{a} * buckets / n);  // < 2^32 * 2^8: no overflow
+  };
+  const auto lo = [&](std::size_t b) {
+    return static_cast<std::size_t>((std::uint64_t{b} * n + buckets - 1) / buckets);
+  };
+  tmp.resize(m);
+  count.resize(n + 1);
+  std::vector<std::size_t> at(buckets * buckets, 0);  // [chunk * buckets + bucket]
+  LoopOptions one_each;
+  one_each.threads = static_cast<int>(threads);
+  one_each.chunk = 1;
+  Pair* const in = pairs.data();
+  Pair* const mid = tmp.data();
+  parallel_for(buckets, one_each, [&](std::size_t c, unsigned) {
+    std::vector<std::size_t> local(buckets, 0);
+    for (std::size_t i = m * c / buckets; i < m * (c + 1) / buckets; ++i) ++local[bucket_of(in[i].a)];
+    std::copy(local.begin(), local.end(), at.begin() + static_cast<std::ptrdiff_t>(c * buckets));
+  });
+  std::vector<std::size_t> begin(buckets + 1, 0);
+  std::size_t sum = 0;
+  for (std::size_t b = 0; b < buckets; ++b) {
+    begin[b] = sum;
+    for (std::size_t c = 0; c < buckets; ++c) {
+      const std::size_t k = at[c * buckets + b];
+      at[c * buckets + b] = sum;
+      sum += k;
+    }
+  }
+  begin[buckets] = sum;
+  parallel_for(buckets, one_each, [&](std::size_t c, unsigned) {
+    std::vector<std::size_t> local(at.begin() + static_cast<std::ptrdiff_t>(c * buckets),
+                                   at.begin() + static_cast<std::ptrdiff_t>((c + 1) * buckets));
+    for (std::size_t i = m * c / buckets; i < m * (c + 1) / buckets; ++i) mid[local[bucket_of(in[i].a)]++] = in[i];
+  });
+  std::uint32_t* const cnt = count.data();
+  parallel_for(buckets, one_each, [&](std::size_t b, unsigned) {
+    const std::size_t a0 = lo(b), a1 = lo(b + 1), first = begin[b], last = begin[b + 1];
+    std::fill(cnt + a0, cnt + a1, 0u);
+    for (std::size_t i = first; i < last; ++i) ++cnt[mid[i].a];
+    std::uint32_t run = 0;  // each a's start (relative to first), then its end
+    for (std::size_t a = a0; a < a1; ++a) {
+      const std::uint32_t k = cnt[a];
+      cnt[a] = run;
+      run += k;
+    }
+    for (std::size_t i = first; i < last; ++i) in[first + cnt[mid[i].a]++] = mid[i];
+    std::size_t start = first;
+    for (std::size_t a = a0; a < a1; ++a) {
+      const std::size_t end = first + cnt[a];
+      if (end - start > kInsertionRunMax) {
+        std::sort(in + start, in + end);
+      } else {
+        for (std::size_t i = start + 1; i < end; ++i) {
+          const Pair x = in[i];
+          std::size_t j = i;
+          for (; j > start && x.b < in[j - 1].b; --j) in[j] = in[j - 1];
+          in[j] = x;
+        }
+      }
+      start = end;
+    }
+  });
 }
 
 }  // namespace detail

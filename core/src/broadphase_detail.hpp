@@ -27,10 +27,14 @@ namespace octocd::detail {
 #undef OCTOCD_HOST_FACTORY_fcl
 #undef OCTOCD_HOST_FACTORY_none
 
-/// Sorts `pairs` (each with a < b < n, no duplicates required) ascending by (a, b) with a
-/// two-pass stable counting sort (O(n + pairs)); `tmp` and `count` are scratch buffers
-/// kept by the caller so that nothing is allocated once they have grown.
+/// Sorts `pairs` (each with a < b < n, no duplicates required) ascending by (a, b), O(n +
+/// pairs). On one thread a two-pass counting sort (by b, then stably by a); on more, a
+/// bucket pass by ranges of a on the worker team (octocd/parallel.hpp), then a counting
+/// sort by a in each bucket with each a's run sorted by b. The same order either way.
+/// `threads`: 0 picks loop_threads() of the pairs from 32,768 on (fewer: one thread); a
+/// count > 1 takes the bucket path with that many threads' buckets. `tmp` and `count` are
+/// scratch buffers kept by the caller so that nothing is allocated once they have grown.
 void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
-                std::vector<std::uint32_t>& count);
+                std::vector<std::uint32_t>& count, unsigned threads = 0);
 
 }  // namespace octocd::detail

@@ -83,6 +83,7 @@
 #include <algorithm>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/parallel.hpp"
 
 #include "broadphase_detail.hpp"
 #include "broadphase_octree_tree.hpp"
@@ -164,6 +165,16 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   static constexpr std::uint32_t kBackoffMax = 64;
   /// Bodies sampled (evenly spaced in body order) for the median size.
   static constexpr std::size_t kFatSample = 1023;
+  /// The fewest bodies whose fattening and escape check run on the worker team
+  /// (octocd/parallel.hpp), and the fewest kept pairs whose filter does.
+  static constexpr std::size_t kParallelBodiesFrom = 4096;
+  static constexpr std::size_t kParallelPairsFrom = 16384;
+
+  static LoopOptions by_bodies() {
+    LoopOptions loop;
+    loop.min_items = kParallelBodiesFrom;
+    return loop;
+  }
 
   /// Largest side of a box; 0 unless finite and > 0.
   static float largest_side(const Aabb& b) {
@@ -192,7 +203,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     }
     fat_d_ = d;
     fat_.resize(n);
-    for (std::size_t i = 0; i < n; ++i) fat_[i] = expanded(boxes[i], d);
+    parallel_for(n, by_bodies(), [&](std::size_t i, unsigned) { fat_[i] = expanded(boxes[i], d); });
   }
 
   /// escaped_ = the bodies whose box is not inside its fattened box (inclusive) and has
@@ -202,15 +213,28 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     const std::size_t n = boxes.size();
     const Aabb* b = boxes.data();
     const Aabb* f = fat_.data();
-    for (std::size_t i0 = 0; i0 < n; i0 += 256) {
-      const std::size_t i1 = std::min(n, i0 + 256);
-      unsigned bad = 0;
-      for (std::size_t i = i0; i < i1; ++i) bad |= escaped(b[i], f[i]);
-      if (bad == 0u) continue;
-      for (std::size_t i = i0; i < i1; ++i) {
-        if (escaped(b[i], f[i]) != 0u) escaped_.push_back(static_cast<std::uint32_t>(i));
+    // Blocks of bodies on the team, each listing its own; the lists joined in block order.
+    const unsigned threads = loop_threads(n, by_bodies());
+    const std::size_t blocks = threads <= 1 ? 1 : std::size_t(threads) * 8;
+    if (escaped_by_.size() < blocks) escaped_by_.resize(blocks);
+    LoopOptions one_each;
+    one_each.threads = static_cast<int>(threads);
+    one_each.chunk = 1;
+    parallel_for(blocks, one_each, [&](std::size_t k, unsigned) {
+      std::vector<std::uint32_t>& list = escaped_by_[k];
+      list.clear();
+      const std::size_t end = n * (k + 1) / blocks;
+      for (std::size_t i0 = n * k / blocks; i0 < end; i0 += 256) {
+        const std::size_t i1 = std::min(end, i0 + 256);
+        unsigned bad = 0;
+        for (std::size_t i = i0; i < i1; ++i) bad |= escaped(b[i], f[i]);
+        if (bad == 0u) continue;
+        for (std::size_t i = i0; i < i1; ++i) {
+          if (escaped(b[i], f[i]) != 0u) list.push_back(static_cast<std::uint32_t>(i));
+        }
       }
-    }
+    });
+    for (std::size_t k = 0; k < blocks; ++k) escaped_.insert(escaped_.end(), escaped_by_[k].begin(), escaped_by_[k].end());
   }
 
   /// 1 when box b is not inside f (inclusive) and has no NaN coordinate, else 0.
@@ -297,15 +321,48 @@ class LooseOctreeBroadPhase final : public BroadPhase {
 
 
   /// out = the cached pairs whose boxes overlap (Eq. 6), in the cache's sorted order.
-  void filter_cached(const std::vector<Aabb>& boxes, std::vector<Pair>& out) const {
-    out.resize(cached_.size());
+  void filter_cached(const std::vector<Aabb>& boxes, std::vector<Pair>& out) {
+    const std::size_t m = cached_.size();
     const Aabb* b = boxes.data();
-    std::size_t w = 0;
-    for (const Pair p : cached_) {
-      out[w] = p;
-      w += overlaps_nb(b[p.a], b[p.b]) ? 1u : 0u;
+    LoopOptions by_pairs;
+    by_pairs.min_items = kParallelPairsFrom;
+    const unsigned threads = loop_threads(m, by_pairs);
+    if (threads <= 1) {
+      out.resize(m);
+      std::size_t w = 0;
+      for (const Pair p : cached_) {
+        out[w] = p;
+        w += overlaps_nb(b[p.a], b[p.b]) ? 1u : 0u;
+      }
+      out.resize(w);
+      return;
     }
-    out.resize(w);
+    // Blocks of kept pairs on the team: each block's overlapping pairs to its own range of
+    // filtered_, then every block's to its place in `out` (the kept order).
+    const std::size_t blocks = std::size_t(threads) * 8;
+    filtered_.resize(m);
+    block_at_.assign(blocks + 1, 0);
+    LoopOptions one_each;
+    one_each.threads = static_cast<int>(threads);
+    one_each.chunk = 1;
+    parallel_for(blocks, one_each, [&](std::size_t k, unsigned) {
+      const std::size_t lo = m * k / blocks, hi = m * (k + 1) / blocks;
+      std::size_t w = lo;
+      for (std::size_t i = lo; i < hi; ++i) {
+        const Pair p = cached_[i];
+        filtered_[w] = p;
+        w += overlaps_nb(b[p.a], b[p.b]) ? 1u : 0u;
+      }
+      block_at_[k + 1] = w - lo;
+    });
+    for (std::size_t k = 0; k < blocks; ++k) block_at_[k + 1] += block_at_[k];
+    out.resize(block_at_[blocks]);
+    parallel_for(blocks, one_each, [&](std::size_t k, unsigned) {
+      const std::size_t lo = m * k / blocks;
+      std::copy(filtered_.begin() + static_cast<std::ptrdiff_t>(lo),
+                filtered_.begin() + static_cast<std::ptrdiff_t>(lo + block_at_[k + 1] - block_at_[k]),
+                out.begin() + static_cast<std::ptrdiff_t>(block_at_[k]));
+    });
   }
 
   std::uint64_t memory_bytes() const {
@@ -313,8 +370,11 @@ class LooseOctreeBroadPhase final : public BroadPhase {
                                 (cached_.capacity() + fresh_.capacity()) * sizeof(Pair) +
                                 (escaped_.capacity() + moved_list_.capacity()) * sizeof(std::uint32_t) +
                                 in_moved_.capacity() + equery_.capacity() * sizeof(QBox) +
-                                sizes_.capacity() * sizeof(float);
-    return bytes + tree_.memory_bytes();
+                                sizes_.capacity() * sizeof(float) + filtered_.capacity() * sizeof(Pair) +
+                                block_at_.capacity() * sizeof(std::size_t);
+    std::uint64_t lists = 0;
+    for (const auto& list : escaped_by_) lists += list.capacity() * sizeof(std::uint32_t);
+    return bytes + lists + tree_.memory_bytes();
   }
 
 
@@ -342,6 +402,9 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   std::vector<std::uint32_t> moved_list_; // those bodies
   std::size_t moved_count_ = 0;
   std::vector<Pair> fresh_;               // pairs found by an update
+  std::vector<std::vector<std::uint32_t>> escaped_by_;  // per block of bodies: its escaped ones
+  std::vector<Pair> filtered_;            // per block of kept pairs: its overlapping ones
+  std::vector<std::size_t> block_at_;     // per block: where its filtered pairs go in `out`
   std::uint64_t update_candidates_ = 0;
   bool cache_ready_ = false;     // cached_ and fat_ are valid
   std::uint32_t plain_left_ = 1; // calls that run the tree on the boxes before a build

@@ -43,6 +43,7 @@
 /// thread count.
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -183,22 +184,42 @@ class StrictOctreeBroadPhase final : public BroadPhase {
 
     // Pass 2: descent. A node's candidates are the bodies of its ancestors that overlap
     // its subtree bounds (the only ones that can overlap a body of its subtree), filtered
-    // from the parent's candidates and the parent's own bodies. In tasks on the worker team:
-    // subtrees of at most `target` nodes (each first rebuilds its ancestors' candidates),
-    // and the nodes above them (task 0); their pairs joined in task order.
+    // from the parent's candidates and the parent's own bodies. In tasks on the worker team,
+    // each first rebuilding its first node's ancestors' candidates: subtrees of at most
+    // `target` nodes, and the nodes above them in runs of about equal own bodies (they hold
+    // the bodies that span coarse cells' centre planes, an eighth of all at 10^6 bodies);
+    // their pairs joined in task order.
     const std::size_t nn = nodes_.size();
     const unsigned threads = loop_threads(items_.size(), by_items);
     const std::size_t target = threads <= 1 ? nn : std::max<std::size_t>(64, nn / (std::size_t(threads) * 16));
     task_roots_.clear();
+    above_.clear();
+    std::uint64_t above_pop = 0;
     for (std::size_t k = 0; k < nn;) {
       if (nodes_[k].last - k <= target) {
         task_roots_.push_back(static_cast<std::uint32_t>(k));
         k = nodes_[k].last;
       } else {
+        above_.push_back(static_cast<std::uint32_t>(k));
+        above_pop += nodes_[k].end - nodes_[k].begin + 1;
         ++k;
       }
     }
-    const std::size_t tasks = task_roots_.size() + 1;
+    // The runs of above_: [above_run_[r], above_run_[r + 1]), cut where equal shares of
+    // their own bodies (plus one a node) begin.
+    const std::size_t runs = std::min<std::size_t>(above_.size(), threads <= 1 ? 1 : std::size_t(threads) * 4);
+    above_run_.assign(1, 0);
+    std::uint64_t sum = 0;
+    for (std::size_t j = 0, r = 1; j < above_.size(); ++j) {
+      if (r < runs && sum >= above_pop * r / runs) {
+        above_run_.push_back(static_cast<std::uint32_t>(j));
+        ++r;
+      }
+      sum += nodes_[above_[j]].end - nodes_[above_[j]].begin + 1;
+    }
+    above_run_.push_back(static_cast<std::uint32_t>(above_.size()));
+    const std::size_t above_tasks = above_.empty() ? 0 : above_run_.size() - 1;
+    const std::size_t tasks = above_tasks + task_roots_.size();
     task_out_.resize(tasks);
     std::vector<std::uint64_t> task_candidates(tasks, 0);
     scratch_.resize(std::max(1u, threads));
@@ -212,24 +233,19 @@ class StrictOctreeBroadPhase final : public BroadPhase {
       std::vector<Pair>& pairs = task_out_[t];
       pairs.clear();
       std::uint64_t& candidates = task_candidates[t];
-      if (t == 0) {  // the nodes above the subtrees
-        for (std::size_t r = 0, k = 0; k < nn;) {
-          if (r < task_roots_.size() && task_roots_[r] == k) {
-            k = nodes_[k].last;
-            ++r;
-            continue;
-          }
-          enter(k, sc);
-          candidates += judge_node(k, sc, pairs);
-          ++k;
+      const bool above = t < above_tasks;
+      const std::uint32_t first = above ? above_[above_run_[t]] : task_roots_[t - above_tasks];
+      sc.chain.clear();
+      for (std::int32_t a = nodes_[first].parent; a >= 0; a = nodes_[a].parent) sc.chain.push_back(a);
+      for (auto a = sc.chain.rbegin(); a != sc.chain.rend(); ++a) enter(std::size_t(*a), sc);
+      if (above) {
+        for (std::uint32_t j = above_run_[t]; j < above_run_[t + 1]; ++j) {
+          enter(above_[j], sc);
+          candidates += judge_node(above_[j], sc, pairs);
         }
         return;
       }
-      const std::uint32_t root = task_roots_[t - 1];
-      sc.chain.clear();
-      for (std::int32_t a = nodes_[root].parent; a >= 0; a = nodes_[a].parent) sc.chain.push_back(a);
-      for (auto a = sc.chain.rbegin(); a != sc.chain.rend(); ++a) enter(std::size_t(*a), sc);
-      for (std::size_t k = root; k < nodes_[root].last; ++k) {
+      for (std::size_t k = first; k < nodes_[first].last; ++k) {
         enter(k, sc);
         candidates += judge_node(k, sc, pairs);
       }
@@ -250,7 +266,8 @@ class StrictOctreeBroadPhase final : public BroadPhase {
                              sizeof(Item) + sorted_.capacity() * sizeof(Aabb) +
                          sminx_.capacity() * sizeof(float) + nodes_.capacity() * sizeof(Node) +
                          parents_.capacity() * sizeof(std::int32_t) +
-                         scratch_bytes() + task_roots_.capacity() * sizeof(std::uint32_t) +
+                         scratch_bytes() +
+                         (task_roots_.capacity() + above_.capacity() + above_run_.capacity()) * sizeof(std::uint32_t) +
                          tmp_pairs_.capacity() * sizeof(Pair) +
                          count_.capacity() * sizeof(std::uint32_t);
   }
@@ -442,49 +459,102 @@ class StrictOctreeBroadPhase final : public BroadPhase {
       it.node = strict_node_key(grid_, b);
       it.minx = float_key(b.min.x);
     });
-    std::size_t w = 0;
-    for (std::size_t k = 0; k < n; ++k) {
+    // Per block of items on the team: its kept and moved counts, then each written to its
+    // place (the kept ones in order into items_, the moved ones into moved_): what one pass
+    // in order gives. A body that changed node may move far in the order: it is sorted
+    // apart and merged (sort_items); a NaN box leaves the item set (rebuilt next time).
+    const unsigned threads = loop_threads(n, by_items);
+    const std::size_t blocks = threads <= 1 ? 1 : std::size_t(threads) * 8;
+    block_kept_.assign(blocks + 1, 0);
+    block_moved_.assign(blocks + 1, 0);
+    std::atomic<bool> any_nan{false};
+    LoopOptions one_each;
+    one_each.threads = static_cast<int>(threads);
+    one_each.chunk = 1;
+    const auto kind = [&](std::size_t k) {  // 0 kept, 1 moved, 2 left out
       const Item& it = fresh_[k];
-      if (it.node == kNoNode) {
-        all_finite_prev_ = false;  // the item set shrinks: rebuild next time
-        continue;
+      if (it.node == kNoNode) return 2;
+      return coherent_ && items_[k].node != it.node ? 1 : 0;
+    };
+    parallel_for(blocks, one_each, [&](std::size_t b, unsigned) {
+      std::size_t kept = 0, moved = 0;
+      bool nan = false;
+      for (std::size_t k = n * b / blocks; k < n * (b + 1) / blocks; ++k) {
+        const int what = kind(k);
+        kept += what == 0;
+        moved += what == 1;
+        nan = nan || what == 2;
       }
-      // A body that changed node may move far in the order: sort it apart and merge.
-      if (coherent_ && items_[k].node != it.node) {
-        moved_.push_back(it);
-      } else {
-        items_[w++] = it;
-      }
+      block_kept_[b + 1] = kept;
+      block_moved_[b + 1] = moved;
+      if (nan) any_nan.store(true, std::memory_order_relaxed);
+    });
+    for (std::size_t b = 0; b < blocks; ++b) {
+      block_kept_[b + 1] += block_kept_[b];
+      block_moved_[b + 1] += block_moved_[b];
     }
-    items_.resize(w);
+    if (any_nan.load()) all_finite_prev_ = false;
+    moved_.resize(block_moved_[blocks]);
+    // The kept items go to merge_buf_, then swapped in: items_ holds the old nodes that
+    // every block reads meanwhile.
+    merge_buf_.resize(block_kept_[blocks]);
+    parallel_for(blocks, one_each, [&](std::size_t b, unsigned) {
+      std::size_t kept = block_kept_[b], moved = block_moved_[b];
+      for (std::size_t k = n * b / blocks; k < n * (b + 1) / blocks; ++k) {
+        const int what = kind(k);
+        if (what == 0) merge_buf_[kept++] = fresh_[k];
+        else if (what == 1) moved_[moved++] = fresh_[k];
+      }
+    });
+    items_.swap(merge_buf_);
   }
 
-  /// Sorts items_ by (node, min.x, body): insertion sort when the previous order is
-  /// available (coherent motion), falling back to std::sort past a budget of moves.
+  /// Sorts items_ by (node, min.x, body): when the previous order is available (coherent
+  /// motion), insertion sort in runs cut at node boundaries on the team, falling back to
+  /// parallel_sort past a run's budget of moves; the moved items sorted and merged in.
   void sort_items() {
     const std::size_t m = items_.size();
+    LoopOptions by_items;
+    by_items.min_items = kParallelItemsFrom;
+    const unsigned threads = loop_threads(m, by_items);
     bool ok = coherent_;
     if (ok) {
-      std::size_t budget = 8 * m + 64;
-      for (std::size_t i = 1; i < m && ok; ++i) {
-        const Item x = items_[i];
-        std::size_t j = i;
-        while (j > 0 && item_less(x, items_[j - 1])) {
-          items_[j] = items_[j - 1];
-          --j;
-          if (--budget == 0) {
-            ok = false;
-            break;
-          }
-        }
-        items_[j] = x;
+      // The kept items' nodes are still in order (a body that changed node was set apart):
+      // only min.x can be out of order, within a node. So runs cut at node boundaries are
+      // sorted on their own, on the team, each by insertion within a budget of moves.
+      const std::size_t runs = threads <= 1 ? 1 : std::size_t(threads) * 8;
+      run_start_.assign(runs + 1, m);
+      run_start_[0] = 0;
+      for (std::size_t r = 1; r < runs; ++r) {
+        std::size_t g = std::max(run_start_[r - 1], m * r / runs);
+        while (g > 0 && g < m && items_[g].node == items_[g - 1].node) ++g;
+        run_start_[r] = g;
       }
+      std::atomic<bool> within{true};
+      LoopOptions one_each;
+      one_each.threads = static_cast<int>(threads);
+      one_each.chunk = 1;
+      parallel_for(runs, one_each, [&](std::size_t r, unsigned) {
+        const std::size_t lo = run_start_[r], hi = run_start_[r + 1];
+        std::size_t budget = 8 * (hi - lo) + 64;
+        for (std::size_t i = lo + 1; i < hi; ++i) {
+          const Item x = items_[i];
+          std::size_t j = i;
+          while (j > lo && item_less(x, items_[j - 1])) {
+            items_[j] = items_[j - 1];
+            --j;
+            if (--budget == 0) {
+              items_[j] = x;
+              within.store(false, std::memory_order_relaxed);
+              return;
+            }
+          }
+          items_[j] = x;
+        }
+      });
+      ok = within.load();
     }
-    if (!ok) {
-      LoopOptions by_items;
-      by_items.min_items = kParallelItemsFrom;
-      parallel_sort(items_, loop_threads(m, by_items), item_less);
-    }
+    if (!ok) parallel_sort(items_, threads, item_less);
     if (!moved_.empty()) {
       std::sort(moved_.begin(), moved_.end(), item_less);
       merge_buf_.resize(m + moved_.size());
@@ -502,12 +572,17 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   std::vector<Item> moved_;
   std::vector<Item> fresh_;  // each item's key this call, in the kept order
   std::vector<Item> merge_buf_;
+  std::vector<std::size_t> block_kept_;   // build_keys' blocks: kept items before each
+  std::vector<std::size_t> block_moved_;  // and moved items before each
+  std::vector<std::size_t> run_start_;  // sort_items' runs: [run_start_[r], run_start_[r + 1])
   std::vector<Aabb> sorted_;
   std::vector<float> sminx_;
   StrictGrid grid_;  // this call's leaf grid (build_keys)
   std::vector<Node> nodes_;
   std::vector<std::int32_t> parents_;
   std::vector<std::uint32_t> task_roots_;
+  std::vector<std::uint32_t> above_;      // the nodes above the subtrees' roots, in pre-order
+  std::vector<std::uint32_t> above_run_;  // the runs of above_ judged as one task each
   std::vector<std::vector<Pair>> task_out_;
   std::vector<Scratch> scratch_;
   std::vector<Pair> tmp_pairs_;

@@ -98,7 +98,7 @@ class Tree {
     }
     compute_keys(boxes, threads);
     sort_order();
-    build_cells(boxes);
+    build_cells(boxes, threads);
     build_tables();
     std::uint64_t candidates = 0;
     const auto ncells = static_cast<std::int64_t>(cells_.size());
@@ -258,8 +258,9 @@ class Tree {
   }
 
   /// Step 3: the sorted slots, the occupied cells and the overflow run. Bodies are
-  /// scattered to their slots in body order (stores, not dependent loads).
-  void build_cells(const std::vector<Aabb>& boxes) {
+  /// scattered to their slots in body order (stores, not dependent loads), on `threads`
+  /// threads of the worker team.
+  void build_cells(const std::vector<Aabb>& boxes, int threads) {
     // Reset the dense-table entries and bits of the previous call's cells.
     for (std::size_t c = 0; c < cells_.size(); ++c) {
       const int l = cells_[c].level;
@@ -277,14 +278,19 @@ class Tree {
     slots_.resize(m);
     qslot_.resize(m);
     slot_of_.resize(n);
-    for (std::size_t k = 0; k < m; ++k) slot_of_[static_cast<std::uint32_t>(order_[k])] = static_cast<std::uint32_t>(k);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (key_[i] == kLooseNoKey) continue;
+    LoopOptions loop;
+    loop.threads = threads;
+    loop.chunk = kKeyChunk;
+    parallel_for(m, loop, [&](std::size_t k, unsigned) {
+      slot_of_[static_cast<std::uint32_t>(order_[k])] = static_cast<std::uint32_t>(k);
+    });
+    parallel_for(n, loop, [&](std::size_t i, unsigned) {
+      if (key_[i] == kLooseNoKey) return;
       const std::uint32_t k = slot_of_[i];
       slots_[k].box = boxes[i];
       slots_[k].body = static_cast<std::uint32_t>(i);
       qslot_[k] = qbody_[i];
-    }
+    });
     overflow_begin_ = overflow_end_ = static_cast<std::uint32_t>(m);
     int level = 0;
     std::uint32_t next_base = loose_level_base(1);

@@ -73,8 +73,12 @@ class SpatialHashBroadPhase final : public BroadPhase {
     LoopOptions by_bodies;
     by_bodies.min_items = kParallelBodiesFrom;
     const unsigned threads = loop_threads(n, by_bodies);
-    std::vector<std::uint32_t> occupied_by(threads, 0);  // bit k: level k holds a body
-    std::vector<std::uint64_t> valid_by(threads, 0);
+    // Per worker, each on its own cache line (the loop adds to them body by body).
+    struct alignas(64) Tally {
+      std::uint64_t valid = 0;
+      std::uint32_t occupied = 0;  // bit k: level k holds a body
+    };
+    std::vector<Tally> by_worker(threads);
 
     // Each body's level and cells (their count in first_[i + 1]), on the team.
     parallel_for(n, by_bodies, [&](std::size_t i, unsigned worker) {
@@ -83,7 +87,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
         kind_[i] = kSkip;
         return;
       }
-      ++valid_by[worker];
+      ++by_worker[worker].valid;
       std::int64_t c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
       int level = 0;
       while (level < kLevels && !cells_at(b, level, c0, c1)) ++level;
@@ -92,15 +96,15 @@ class SpatialHashBroadPhase final : public BroadPhase {
         return;
       }
       level_[i] = static_cast<std::uint8_t>(level);
-      occupied_by[worker] |= 1u << level;
+      by_worker[worker].occupied |= 1u << level;
       for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = static_cast<std::int32_t>(c0[a]);
       first_[i + 1] = static_cast<std::size_t>((c1[0] - c0[0] + 1) * (c1[1] - c0[1] + 1) * (c1[2] - c0[2] + 1));
     });
     std::uint32_t occupied = 0;
     std::uint64_t valid = 0;
     for (unsigned w = 0; w < threads; ++w) {
-      occupied |= occupied_by[w];
-      valid += valid_by[w];
+      occupied |= by_worker[w].occupied;
+      valid += by_worker[w].valid;
     }
     for (std::size_t i = 0; i < n; ++i) {
       first_[i + 1] += first_[i];

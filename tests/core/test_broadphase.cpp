@@ -18,6 +18,8 @@
 #include "octocd/parallel.hpp"
 #include "support/doc_broadphases.hpp"
 
+#include "../../core/src/broadphase_detail.hpp"
+
 namespace octocd {
 namespace octocd_test_broadphase {
 namespace {
@@ -777,12 +779,47 @@ TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
   for (const auto& c : candidates) EXPECT_EQ(c, candidates.front());
 }
 
+// The loose octree's pair cache on the worker team: its fattened boxes, the escape check
+// (blocks of bodies, their lists joined in order) and the filter of the kept pairs (blocks
+// of pairs, from 16,384 on) give the same pairs and counts on 1, 2 and 3 threads over a
+// build, hits, an update of a few escaped bodies and a rebuild, each equal to brute force.
+TEST(BroadPhase, LooseOctreePairCacheThreadCountDoesNotChangeTheAnswer) {
+  std::vector<Aabb> boxes = random_boxes(20000, 93, 2.5f);
+  std::vector<std::vector<Aabb>> frames = {boxes, boxes, boxes};
+  for (Aabb& b : boxes) b = translated(b, {1e-4f, 0.0f, -1e-4f});  // inside the fattened boxes
+  frames.push_back(boxes);
+  for (std::uint32_t i : {5u, 4000u, 15000u}) boxes[i] = translated(boxes[i], {0.3f, 0.1f, -0.2f});
+  frames.push_back(boxes);
+  for (Aabb& b : boxes) b = translated(b, {0.25f, 0.0f, 0.0f});
+  frames.push_back(boxes);
+  std::vector<std::vector<Pair>> wants;
+  for (const auto& frame : frames) wants.push_back(brute(frame));
+  std::vector<std::vector<std::uint64_t>> candidates;
+  for (int threads : {1, 2, 3}) {
+    const ThreadCount at(threads);
+    auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
+    std::vector<Pair> got;
+    BroadPhaseStats st;
+    candidates.emplace_back();
+    for (std::size_t call = 0; call < frames.size(); ++call) {
+      bp->find_pairs(frames[call], got, st);
+      EXPECT_TRUE(got == wants[call]) << threads << " threads, call " << call << ": " << describe_diff(got, wants[call]);
+      candidates.back().push_back(st.cell_candidates);
+    }
+  }
+  // Call 2 is a hit: its count is the kept pairs, enough for the filter's blocks.
+  EXPECT_GE(candidates.front()[2], 16384u);
+  EXPECT_LT(wants[2].size(), candidates.front()[2]);
+  for (const auto& c : candidates) EXPECT_EQ(c, candidates.front());
+}
+
 // The spatial hash and the strict octree run on the worker team from 4096 bodies on: the
 // pairs and the candidate count must not depend on the thread count, with bodies on coarser
 // levels of the hash (pairs across levels), a body out of every level's range (oversize),
 // one with a NaN coordinate, and bodies at the strict octree's root and deep below it; on
-// one instance, calls with a fresh order, the kept order and bodies moved (the strict
-// octree's moved items sorted apart and merged).
+// one instance, calls with a fresh order, the kept order, bodies moved (the strict
+// octree's moved items sorted apart and merged) and every body nudged (its kept order
+// re-sorted within nodes).
 TEST(BroadPhase, SpatialHashAndStrictOctreeThreadCountDoesNotChangeTheAnswer) {
   std::vector<Aabb> boxes = random_boxes(12000, 91);
   boxes[10] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};   // floor slab: a coarse level, the root
@@ -796,7 +833,12 @@ TEST(BroadPhase, SpatialHashAndStrictOctreeThreadCountDoesNotChangeTheAnswer) {
   finite[14] = {{0.1f, 0.2f, 0.3f}, {0.15f, 0.25f, 0.35f}};
   std::vector<Aabb> moved = finite;
   for (std::size_t i = 20; i < moved.size(); i += 7) moved[i] = translated(moved[i], {0.9f, -0.4f, 0.3f});
-  const std::vector<std::vector<Aabb>> frames = {boxes, finite, finite, moved};
+  // Then every body nudged along x by up to 1 cm: most stay in their node, their order by
+  // min.x changes (the strict octree's kept order re-sorted by insertion within nodes).
+  std::vector<Aabb> nudged = moved;
+  for (std::size_t i = 0; i < nudged.size(); ++i)
+    nudged[i] = translated(nudged[i], {static_cast<float>((i * 7919) % 101) * 2e-4f - 0.01f, 0.0f, 0.0f});
+  const std::vector<std::vector<Aabb>> frames = {boxes, finite, finite, moved, nudged};
   std::vector<std::vector<Pair>> wants;
   for (const auto& frame : frames) wants.push_back(brute(frame));
   for (const char* name : {"spatial-hash", "octree-strict"}) {
@@ -815,6 +857,49 @@ TEST(BroadPhase, SpatialHashAndStrictOctreeThreadCountDoesNotChangeTheAnswer) {
     }
     for (std::size_t k = frames.size(); k < candidates.size(); ++k)
       EXPECT_EQ(candidates[k], candidates[k % frames.size()]) << name << " " << k;
+  }
+}
+
+// The pair sort every broadphase ends with (core/src/broadphase_detail.hpp) against
+// std::sort, on one thread and on the bucket path with thread counts that leave buckets
+// of unequal width: random pairs in input order, a body in pairs with most others (a run
+// of one `a` far longer than insertion's, as a floor in a pile gives), pairs only near the
+// ends of the body range (empty buckets), duplicates, and fewer bodies than buckets.
+TEST(BroadPhase, PairSortGivesStdSortsOrderOnOneThreadAndInBuckets) {
+  std::mt19937 rng(2026);
+  const auto random_pairs = [&](std::size_t n, std::size_t m, std::uint32_t lo, std::uint32_t hi) {
+    std::uniform_int_distribution<std::uint32_t> body(lo, hi - 1);
+    std::vector<Pair> pairs;
+    while (pairs.size() < m) {
+      std::uint32_t a = body(rng), b = body(rng);
+      if (a == b || a >= n || b >= n) continue;
+      pairs.push_back({std::min(a, b), std::max(a, b)});
+    }
+    return pairs;
+  };
+  std::vector<std::pair<std::string, std::pair<std::size_t, std::vector<Pair>>>> cases;
+  cases.push_back({"random", {50000, random_pairs(50000, 200000, 0, 50000)}});
+  std::vector<Pair> floor = random_pairs(40000, 60000, 0, 40000);
+  for (std::uint32_t b = 2; b < 40000; b += 2) floor.push_back({1, b});
+  std::shuffle(floor.begin(), floor.end(), rng);
+  cases.push_back({"a floor's run", {40000, floor}});
+  std::vector<Pair> ends = random_pairs(100000, 40000, 0, 300);
+  for (const Pair& p : random_pairs(100000, 40000, 99700, 100000)) ends.push_back(p);
+  cases.push_back({"the ends only", {100000, ends}});
+  std::vector<Pair> twice = random_pairs(30000, 50000, 0, 30000);
+  twice.insert(twice.end(), twice.begin(), twice.begin() + 20000);
+  cases.push_back({"duplicates", {30000, twice}});
+  cases.push_back({"three bodies", {3, random_pairs(3, 70000, 0, 3)}});
+  for (const auto& [name, c] : cases) {
+    const auto& [n, pairs] = c;
+    std::vector<Pair> want = pairs;
+    std::sort(want.begin(), want.end());
+    for (const unsigned threads : {1u, 2u, 3u, 7u, 16u, 64u}) {
+      std::vector<Pair> got = pairs, tmp;
+      std::vector<std::uint32_t> count;
+      detail::sort_pairs(got, n, tmp, count, threads);
+      EXPECT_TRUE(got == want) << name << ", " << threads << " threads: " << describe_diff(got, want);
+    }
   }
 }
 
