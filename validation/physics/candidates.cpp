@@ -378,9 +378,11 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
       dynamic_of(want, got);
       want.swap(got);
       dynamic_of(rec.pairs, got);
-      std::vector<Pair> missing, extra;
-      std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
-      std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
+      std::vector<Pair> missing, extra;  // computed only where the sets differ (both sorted)
+      if (want != got) {
+        std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
+        std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
+      }
       const bool same = missing.empty() && extra.empty();
       const Pair first_diff = !missing.empty() ? missing.front() : !extra.empty() ? extra.front() : Pair{};
       broad_exact.check(same, double(missing.size() + extra.size()),

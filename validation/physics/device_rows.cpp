@@ -89,10 +89,23 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
   const std::vector<Pair>& cand = f.answer.candidates;
   device_candidates += cand.size();
 
-  f.contact_pairs.clear();
-  for (const ContactRecord& c : rec.contacts) f.contact_pairs.push_back(c.pair);
-  std::sort(f.contact_pairs.begin(), f.contact_pairs.end());
-  f.contact_pairs.erase(std::unique(f.contact_pairs.begin(), f.contact_pairs.end()), f.contact_pairs.end());
+  // The loops below over the candidates, the contact rows and the truth pairs run on the
+  // threads (each item writes its own slot; lists are selected in item order), so the
+  // frame is the one a single thread builds.
+  // The contact pairs: the pair of each run of one pair's rows (rows of a pair are
+  // consecutive), sorted and made distinct where the engine's runs are not in pair order.
+  std::vector<std::size_t> starts;
+  pair_run_starts(rec.contacts, starts, threads, stop);
+  f.contact_pairs.resize(starts.size());
+  parallel_ranges(starts.size(), loop_threads(threads, starts.size(), kParallelSelectFrom), stop,
+                  [&](std::size_t first, std::size_t last) {
+    for (std::size_t k = first; k < last; ++k) f.contact_pairs[k] = rec.contacts[starts[k]].pair;
+  });
+  if (std::adjacent_find(f.contact_pairs.begin(), f.contact_pairs.end(), [](Pair a, Pair b) { return !(a < b); }) !=
+      f.contact_pairs.end()) {
+    std::sort(f.contact_pairs.begin(), f.contact_pairs.end());
+    f.contact_pairs.erase(std::unique(f.contact_pairs.begin(), f.contact_pairs.end()), f.contact_pairs.end());
+  }
 
   // Which candidates enter the truth: as the CPU's checked_frame, every candidate whose
   // shapes intersect (touching counts), every candidate with a broadphase margin or a
@@ -109,8 +122,9 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
       hit[k] = ref->intersect(p.a, p.b, det[p.a], det[p.b]) ? 1 : 0;
   });
   std::vector<Pair> hits;
-  for (std::size_t k = 0; k < cand.size(); ++k)
-    if (hit[k]) hits.push_back(cand[k]);
+  parallel_select(
+      cand.size(), hits, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+      [&](std::size_t k) { return hit[k] != 0; }, [&](std::size_t k) { return cand[k]; });
   f.truth_pairs.clear();
   std::set_union(hits.begin(), hits.end(), f.contact_pairs.begin(), f.contact_pairs.end(),
                  std::back_inserter(f.truth_pairs));
@@ -118,22 +132,27 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
 
   // Each truth pair's box test: the candidate's, or the device's for contact pairs that are
   // no candidates.
-  std::vector<DeviceBoxSat> sat(f.truth_pairs.size());
-  std::vector<Pair> extra;
-  std::vector<std::size_t> extra_at;
-  {
+  // Both lists are sorted: each block of truth pairs looks its candidates up onwards.
+  const std::size_t nt = f.truth_pairs.size();
+  std::vector<DeviceBoxSat> sat(nt);
+  std::vector<char> is_extra(nt, 0);
+  parallel_ranges(nt, loop_threads(threads, nt, kParallelSelectFrom), stop, [&](std::size_t first, std::size_t last) {
     std::size_t cursor = 0;
-    for (std::size_t i = 0; i < f.truth_pairs.size(); ++i) {
+    for (std::size_t i = first; i < last; ++i) {
       const Pair p = f.truth_pairs[i];
       const std::size_t k = seek(cand, p, cursor);
-      if (k < cand.size() && cand[k] == p) {
+      if (k < cand.size() && cand[k] == p)
         sat[i] = f.answer.sat[k];
-      } else {
-        extra.push_back(p);
-        extra_at.push_back(i);
-      }
+      else
+        is_extra[i] = 1;
     }
-  }
+  });
+  std::vector<Pair> extra;
+  std::vector<std::size_t> extra_at;
+  parallel_select(
+      nt, extra_at, loop_threads(threads, nt, kParallelSelectFrom), stop, [&](std::size_t i) { return is_extra[i] != 0; },
+      [&](std::size_t i) { return i; });
+  for (const std::size_t i : extra_at) extra.push_back(f.truth_pairs[i]);
   if (!extra.empty()) {
     std::vector<DeviceBoxSat> more;
     device->box_sat(extra, more);
@@ -144,28 +163,31 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
   // rounded shapes' plus their radii), or that are apart by more than their radii and the
   // margin (the least overlap's negative bounds the distance from below). Touching boxes,
   // boxes closer than that, and every other pair: the CPU reference.
-  std::vector<Pending> pending(f.truth_pairs.size());
+  std::vector<Pending> pending(nt);
   const double apart_beyond = std::max(0.0, tol.broadphase_margin_m - slack);
-  for (std::size_t i = 0; i < f.truth_pairs.size(); ++i) {
-    const Pair p = f.truth_pairs[i];
-    const DeviceBoxSat& s = sat[i];
-    const double r = inflation(p);
-    Pending& e = pending[i];
-    if (s.box && s.overlap > 0) {
-      e.t.g.valid = true;
-      e.t.g.penetrating = true;
-      e.t.g.depth = s.overlap + r;
-    } else if (s.box && -s.overlap - r > apart_beyond) {
-      e.t.g.valid = true;
-      e.t.g.penetrating = false;
-      e.t.g.distance = -s.overlap - r;  // a lower bound: enough to decide rows 1 and 4
-    } else {
-      e.cpu = true;
+  parallel_ranges(nt, loop_threads(threads, nt, kParallelSelectFrom), stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t i = first; i < last; ++i) {
+      const Pair p = f.truth_pairs[i];
+      const DeviceBoxSat& s = sat[i];
+      const double r = inflation(p);
+      Pending& e = pending[i];
+      if (s.box && s.overlap > 0) {
+        e.t.g.valid = true;
+        e.t.g.penetrating = true;
+        e.t.g.depth = s.overlap + r;
+      } else if (s.box && -s.overlap - r > apart_beyond) {
+        e.t.g.valid = true;
+        e.t.g.penetrating = false;
+        e.t.g.distance = -s.overlap - r;  // a lower bound: enough to decide rows 1 and 4
+      } else {
+        e.cpu = true;
+      }
     }
-  }
+  });
   std::vector<std::size_t> cpu;
-  for (std::size_t i = 0; i < pending.size(); ++i)
-    if (pending[i].cpu) cpu.push_back(i);
+  parallel_select(
+      nt, cpu, loop_threads(threads, nt, kParallelSelectFrom), stop, [&](std::size_t i) { return pending[i].cpu; },
+      [&](std::size_t i) { return i; });
   std::vector<PairReferenceScratch> scratch(loop_threads(threads, cpu.size()));
   parallel_items(cpu.size(), threads, stop, [&](std::size_t k, unsigned worker) {
     const std::size_t i = cpu[k];
@@ -176,8 +198,10 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
     pending[i].t.g = t.g;
     pending[i].t.cpu = true;
   });
-  f.truth.resize(pending.size());
-  for (std::size_t i = 0; i < pending.size(); ++i) f.truth[i] = pending[i].t;
+  f.truth.resize(nt);
+  parallel_ranges(nt, loop_threads(threads, nt, kParallelSelectFrom), stop, [&](std::size_t first, std::size_t last) {
+    for (std::size_t i = first; i < last; ++i) f.truth[i] = pending[i].t;
+  });
   device_box_pairs += pending.size() - cpu.size();
   device_cpu_pairs += cpu.size();
   for (const std::size_t i : cpu) {
@@ -187,12 +211,17 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
     ++device_cpu_shapes[a < b ? a + " / " + b : b + " / " + a];
   }
 
-  // The required pairs, as the CPU's checked_frame takes them.
-  f.required.clear();
-  std::size_t cursor = 0;
-  for (std::size_t k = 0; k < cand.size(); ++k) {
-    if (required_pair(f, cand[k], hit[k] != 0, cursor)) f.required.push_back(cand[k]);
-  }
+  // The required pairs, as the CPU's checked_frame takes them: looked up in blocks, each
+  // onwards from its own cursor, then listed in order.
+  std::vector<char> is_required(cand.size(), 0);
+  parallel_ranges(cand.size(), loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+                  [&](std::size_t first, std::size_t last) {
+    std::size_t cursor = 0;
+    for (std::size_t k = first; k < last; ++k) is_required[k] = required_pair(f, cand[k], hit[k] != 0, cursor) ? 1 : 0;
+  });
+  parallel_select(
+      cand.size(), f.required, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+      [&](std::size_t k) { return is_required[k] != 0; }, [&](std::size_t k) { return cand[k]; });
 }
 
 const DeviceTruth& PhysicsValidators::Impl::truth_after(DeviceCheckedFrame& f, Pair p, std::size_t& cursor) const {
