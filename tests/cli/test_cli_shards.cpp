@@ -237,6 +237,49 @@ TEST(ValidateThreads, ThreadsAndPipelineGiveTheSerialVerdict) {
   fs::remove_all(dir, ec);
 }
 
+// The model tier's per-contact rows (non-penetration-eq14, friction-monotonicity,
+// impulse-conservation) judge a frame's contacts in blocks on the threads, merged in order,
+// a block holding a row's first failure judged again on the calling thread: over 2,000
+// contacts a frame of boxes-uniform-100k, with Eq. 14's tolerance tightened until a
+// thousand contacts fail, 1 and 2 threads give the same rows (all but seconds), the first
+// failure's text included.
+TEST(ValidateThreads, PerContactModelRowsOnThreadsGiveTheSerialVerdict) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-contact-rows-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string scene = octocd::test::source_dir() + "/datasets/scenes/boxes-uniform-100k.json";
+  auto judge = [&](const std::string& threads) {
+    const fs::path out = dir / ("t" + threads + ".json");
+    const Result r = run_octocd("validate " + scene + " --frames 8 --every 8 --against none " +
+                                "--tolerance contraction_m=1e-8 --threads " + threads + " --json " + out.string());
+    EXPECT_EQ(r.code, 3) << r.output;
+    nlohmann::json j = load(out);
+    for (auto& row : j["rows"]) row.erase("seconds");
+    return j["rows"];
+  };
+  const nlohmann::json serial = judge("1"), threaded = judge("2");
+  ASSERT_EQ(serial.size(), threaded.size());
+  bool seen = false;
+  for (std::size_t k = 0; k < serial.size(); ++k) {
+    EXPECT_EQ(serial[k], threaded[k]) << serial[k]["name"];
+    if (serial[k]["name"] != "non-penetration-eq14") continue;
+    seen = true;
+    EXPECT_EQ(serial[k]["verdict"], "fail");
+    EXPECT_GT(serial[k]["measured"].get<double>(), 100.0) << "failures in many blocks";
+    const std::string detail = serial[k]["detail"];
+    EXPECT_EQ(detail.rfind("frame 1: pair", 0), 0u) << detail;
+  }
+  EXPECT_TRUE(seen);
+  // Over 2,048 contacts a frame (the rows go to the threads from 1,024): friction-monotonicity
+  // counts one check a contact.
+  for (const auto& row : serial)
+    if (row["name"] == "friction-monotonicity") {
+      const std::string detail = row["detail"];
+      EXPECT_GT(std::stoull(detail), 8u * 2048u) << detail;
+    }
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
+
 }  // namespace
 
 }  // namespace octocd_test_cli_shards

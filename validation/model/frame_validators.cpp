@@ -258,6 +258,38 @@ void find_pairs_all_stoppable(const std::vector<std::shared_ptr<BroadPhase>>& bp
 
 }  // namespace
 
+namespace {
+
+/// Contacts per block of rows 4-6 (FrameValidators::observe): a block merged in a few
+/// instructions, one with a row's first failure judged again on the calling thread.
+constexpr std::size_t kContactBlock = 256;
+
+/// The fewest contacts whose rows 4-6 run on the validators' threads.
+constexpr std::size_t kParallelContactsFrom = 1024;
+
+/// A CheckTally's checks of one block judged off the calling thread: counted, never
+/// described (CheckTally keeps the text of its first failure only).
+struct DryCheck {
+  std::uint64_t checks = 0, failures = 0;
+  double worst = 0.0;
+  template <class F>
+  void check(bool ok, double figure, F&&) {
+    ++checks;
+    worst = std::max(worst, figure);
+    if (!ok) ++failures;
+  }
+  /// Whether `t`, given these checks, would write its first failure's text.
+  bool replays(const CheckTally& t) const { return failures > 0 && t.failures == 0; }
+  /// These checks added to `t` (where none replays: counts and the largest figure).
+  void add_to(CheckTally& t) const {
+    t.checks += checks;
+    t.failures += failures;
+    t.worst = std::max(t.worst, worst);
+  }
+};
+
+}  // namespace
+
 struct FrameValidators::Impl {
   const Model* model = nullptr;
   Source source;
@@ -573,115 +605,162 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     }
   }
 
-  // 4-6 on the model's per-contact terms (the paper's response only).
+  // 4-6 on the model's per-contact terms (the paper's response only). Each contact is
+  // judged on its own: in blocks of kContactBlock on the validators' threads, each into its
+  // own counts (DryCheck), merged in block order; a block with a failure where its row has
+  // none yet is judged again on this thread, so every tally is the serial loop's, its
+  // first failure's text included. The pass's time is row 4's (rows 5 and 6 share it).
   if (!judge_response) return;
-  for (const ContactRecord& given : rec.contacts) {
-    poll();
-    const float wa = w[given.pair.a], wb = w[given.pair.b];
-    // 5. Friction cone, |J_t| <= mu_s J_n (section 3.3.2), on the reported impulses.
-    const double cone = std::fabs(given.jt) - static_cast<double>(p.mu_static) * given.jn;
-    const bool cone_ok = cone <= tol.friction_cone_rel * static_cast<double>(p.mu_static) * given.jn + 1e-9;
-    // Another engine reports pair, normal, depth and impulses only. Where every dynamic
-    // body of the pair has this one contact in the frame, its state change is this
-    // contact's own: corrections from the world AABBs (the position after integration)
-    // to x_post, velocity changes from the integrated v_pre (design.md section 4.1) to v_post.
-    ContactRecord c = given;
-    bool terms = rec.has_contact_terms;
-    if (!terms && has_states &&
-        (!(wa > 0.0f) || contacts_of[c.pair.a] == 1) && (!(wb > 0.0f) || contacts_of[c.pair.b] == 1)) {
-      terms = true;
-      const Vec3 n = c.normal;
-      c.axis = std::fabs(n.x) >= std::fabs(n.y) && std::fabs(n.x) >= std::fabs(n.z) ? 0
-               : std::fabs(n.y) >= std::fabs(n.z)                                    ? 1
-                                                                                     : 2;
-      auto derive = [&](std::uint32_t i, Vec3& v, Vec3& dx, Vec3& dv) {
-        v = rec.v_pre[i];
-        if (w[i] > 0.0f) v = v + model.scene.dt * model.scene.gravity;
-        dx = rec.x_post[i] - pre_position(i);
-        dv = rec.v_post[i] - v;
-      };
-      derive(c.pair.a, c.v_a, c.dx_a, c.dv_a);
-      derive(c.pair.b, c.v_b, c.dx_b, c.dv_b);
-    }
-    if (!terms) {
-      ++s.contacts_unjudged;
-      s.friction.check(cone_ok, std::max(cone, 0.0),
+  const RowClock clock(s.t_contraction);
+  struct Counts {
+    std::uint64_t unjudged = 0, dynamic_pairs = 0;
+  };
+  auto judge_contacts = [&](std::size_t first, std::size_t last, auto& contraction, auto& friction, auto& momentum,
+                            auto& centre, Counts& counts) {
+    for (std::size_t k = first; k < last; ++k) {
+      const ContactRecord& given = rec.contacts[k];
+      const float wa = w[given.pair.a], wb = w[given.pair.b];
+      // 5. Friction cone, |J_t| <= mu_s J_n (section 3.3.2), on the reported impulses.
+      const double cone = std::fabs(given.jt) - static_cast<double>(p.mu_static) * given.jn;
+      const bool cone_ok = cone <= tol.friction_cone_rel * static_cast<double>(p.mu_static) * given.jn + 1e-9;
+      // Another engine reports pair, normal, depth and impulses only. Where every dynamic
+      // body of the pair has this one contact in the frame, its state change is this
+      // contact's own: corrections from the world AABBs (the position after integration)
+      // to x_post, velocity changes from the integrated v_pre (design.md section 4.1) to v_post.
+      ContactRecord c = given;
+      bool terms = rec.has_contact_terms;
+      if (!terms && has_states &&
+          (!(wa > 0.0f) || contacts_of[c.pair.a] == 1) && (!(wb > 0.0f) || contacts_of[c.pair.b] == 1)) {
+        terms = true;
+        const Vec3 n = c.normal;
+        c.axis = std::fabs(n.x) >= std::fabs(n.y) && std::fabs(n.x) >= std::fabs(n.z) ? 0
+                 : std::fabs(n.y) >= std::fabs(n.z)                                    ? 1
+                                                                                       : 2;
+        auto derive = [&](std::uint32_t i, Vec3& v, Vec3& dx, Vec3& dv) {
+          v = rec.v_pre[i];
+          if (w[i] > 0.0f) v = v + model.scene.dt * model.scene.gravity;
+          dx = rec.x_post[i] - pre_position(i);
+          dv = rec.v_post[i] - v;
+        };
+        derive(c.pair.a, c.v_a, c.dx_a, c.dv_a);
+        derive(c.pair.b, c.v_b, c.dx_b, c.dv_b);
+      }
+      if (!terms) {
+        ++counts.unjudged;
+        friction.check(cone_ok, std::max(cone, 0.0),
                        [&] { return fmt::format("frame {}: pair ({}, {}) |J_t| {:.6g} vs mu_s J_n {:.6g}", frame, c.pair.a,
                                    c.pair.b, std::fabs(c.jt), p.mu_static * c.jn); });
-      continue;
-    }
-    // 4. Non-penetration contraction (Eq. 14, section 3.3.3), this contact's own
-    // correction only: d' - delta <= (1 - alpha beta)(d - delta) and no overshoot past
-    // the slop (the sequence is monotone).
-    {
-      const RowClock clock(s.t_contraction);
-      const double d = overlap_along(boxes[c.pair.a], boxes[c.pair.b], c.axis);
-      const double d1 = overlap_along(shifted(boxes[c.pair.a], c.dx_a),
-                                      shifted(boxes[c.pair.b], c.dx_b), c.axis);
-      const double slop = p.slop;
-      const double rate = 1.0 - static_cast<double>(p.alpha) * p.beta;
-      double excess = 0.0;
-      bool ok = true;
-      if (wa + wb > 0.0f) {
-        if (d > slop) {
-          excess = std::max(d1 - slop - rate * (d - slop), (slop - d1));
-          ok = d1 - slop <= rate * (d - slop) + tol.contraction_m && d1 - slop >= -tol.contraction_m;
-        } else {
-          excess = std::fabs(d1 - d);
-          ok = excess <= tol.contraction_m;
-        }
+        continue;
       }
-      s.contraction.check(ok, std::max(excess, 0.0),
+      // 4. Non-penetration contraction (Eq. 14, section 3.3.3), this contact's own
+      // correction only: d' - delta <= (1 - alpha beta)(d - delta) and no overshoot past
+      // the slop (the sequence is monotone).
+      {
+        const double d = overlap_along(boxes[c.pair.a], boxes[c.pair.b], c.axis);
+        const double d1 = overlap_along(shifted(boxes[c.pair.a], c.dx_a),
+                                        shifted(boxes[c.pair.b], c.dx_b), c.axis);
+        const double slop = p.slop;
+        const double rate = 1.0 - static_cast<double>(p.alpha) * p.beta;
+        double excess = 0.0;
+        bool ok = true;
+        if (wa + wb > 0.0f) {
+          if (d > slop) {
+            excess = std::max(d1 - slop - rate * (d - slop), (slop - d1));
+            ok = d1 - slop <= rate * (d - slop) + tol.contraction_m && d1 - slop >= -tol.contraction_m;
+          } else {
+            excess = std::fabs(d1 - d);
+            ok = excess <= tol.contraction_m;
+          }
+        }
+        contraction.check(ok, std::max(excess, 0.0),
                           [&] { return fmt::format("frame {}: pair ({}, {}) depth {:.6g} -> {:.6g} m (slop {}, "
                                       "alpha beta {})",
                                       frame, c.pair.a, c.pair.b, d, d1, p.slop, p.alpha * p.beta); });
-    }
-    // 5. Friction: no rise of the relative tangential speed, |J_t| <= mu_s J_n (3.3.2).
-    {
-      const RowClock clock(s.t_friction);
-      const Vec3 before = tangential(c.v_a - c.v_b, c.normal);
-      const Vec3 after = tangential((c.v_a + c.dv_a) - (c.v_b + c.dv_b), c.normal);
-      const double rise = static_cast<double>(length(after)) - length(before);
-      const bool ok = rise <= tol.friction_speed && cone_ok;
-      s.friction.check(ok, std::max(rise, cone),
+      }
+      // 5. Friction: no rise of the relative tangential speed, |J_t| <= mu_s J_n (3.3.2).
+      {
+        const Vec3 before = tangential(c.v_a - c.v_b, c.normal);
+        const Vec3 after = tangential((c.v_a + c.dv_a) - (c.v_b + c.dv_b), c.normal);
+        const double rise = static_cast<double>(length(after)) - length(before);
+        const bool ok = rise <= tol.friction_speed && cone_ok;
+        friction.check(ok, std::max(rise, cone),
                        [&] { return fmt::format("frame {}: pair ({}, {}) |v_t| {:.6g} -> {:.6g} m/s, |J_t| {:.6g} "
                                    "vs mu_s J_n {:.6g}",
                                    frame, c.pair.a, c.pair.b, length(before), length(after),
                                    std::fabs(c.jt), p.mu_static * c.jn); });
+      }
+      // 6. Conservation per dynamic-dynamic contact: momentum and mass-weighted centre.
+      if (wa > 0.0f && wb > 0.0f) {
+        ++counts.dynamic_pairs;
+        const double ma = 1.0 / wa, mb = 1.0 / wb;
+        // Terms derived from another engine's states carry the float32 rounding of the
+        // values they are differences of (positions through the AABBs, velocities): a few
+        // roundings of those magnitudes, as for the applied state.
+        auto inf = [](Vec3 u) { return std::max({std::fabs(u.x), std::fabs(u.y), std::fabs(u.z)}); };
+        const double slack_x =
+            rec.has_contact_terms
+                ? 0.0
+                : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
+                      std::max({inf(boxes[c.pair.a].min), inf(boxes[c.pair.a].max), inf(boxes[c.pair.b].min),
+                                inf(boxes[c.pair.b].max)});
+        const double slack_v =
+            rec.has_contact_terms
+                ? 0.0
+                : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
+                      std::max({inf(c.v_a), inf(c.v_b), inf(c.v_a + c.dv_a), inf(c.v_b + c.dv_b)});
+        auto check_pair = [&](auto& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
+          const double sx = ma * da.x + mb * db.x, sy = ma * da.y + mb * db.y,
+                       sz = ma * da.z + mb * db.z;
+          const double scale = ma * length(da) + mb * length(db);
+          const double residual = norm(sx, sy, sz);
+          const double share = scale > 0 ? residual / scale : 0.0;
+          const double bound = rel * scale + slack + 1e-9;
+          t.check(residual <= bound, residual / bound,
+                  [&] { return fmt::format("frame {}: pair ({}, {}) {} changes by {:.3g} ({:.3g} of the exchange)",
+                              frame, c.pair.a, c.pair.b, what, residual, share); });
+        };
+        check_pair(momentum, c.dv_a, c.dv_b, tol.momentum_rel, slack_v, "momentum");
+        check_pair(centre, c.dx_a, c.dx_b, tol.centre_rel, slack_x, "mass-weighted centre");
+      }
     }
-    // 6. Conservation per dynamic-dynamic contact: momentum and mass-weighted centre.
-    if (wa > 0.0f && wb > 0.0f) {
-      const RowClock clock(s.t_conservation);
-      ++s.dynamic_pairs;
-      const double ma = 1.0 / wa, mb = 1.0 / wb;
-      // Terms derived from another engine's states carry the float32 rounding of the
-      // values they are differences of (positions through the AABBs, velocities): a few
-      // roundings of those magnitudes, as for the applied state.
-      auto inf = [](Vec3 u) { return std::max({std::fabs(u.x), std::fabs(u.y), std::fabs(u.z)}); };
-      const double slack_x =
-          rec.has_contact_terms
-              ? 0.0
-              : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
-                    std::max({inf(boxes[c.pair.a].min), inf(boxes[c.pair.a].max), inf(boxes[c.pair.b].min),
-                              inf(boxes[c.pair.b].max)});
-      const double slack_v =
-          rec.has_contact_terms
-              ? 0.0
-              : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
-                    std::max({inf(c.v_a), inf(c.v_b), inf(c.v_a + c.dv_a), inf(c.v_b + c.dv_b)});
-      auto check_pair = [&](CheckTally& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
-        const double sx = ma * da.x + mb * db.x, sy = ma * da.y + mb * db.y,
-                     sz = ma * da.z + mb * db.z;
-        const double scale = ma * length(da) + mb * length(db);
-        const double residual = norm(sx, sy, sz);
-        const double share = scale > 0 ? residual / scale : 0.0;
-        const double bound = rel * scale + slack + 1e-9;
-        t.check(residual <= bound, residual / bound,
-                [&] { return fmt::format("frame {}: pair ({}, {}) {} changes by {:.3g} ({:.3g} of the exchange)",
-                            frame, c.pair.a, c.pair.b, what, residual, share); });
-      };
-      check_pair(s.momentum, c.dv_a, c.dv_b, tol.momentum_rel, slack_v, "momentum");
-      check_pair(s.centre, c.dx_a, c.dx_b, tol.centre_rel, slack_x, "mass-weighted centre");
+  };
+  const std::size_t n_contacts = rec.contacts.size();
+  const std::size_t blocks = (n_contacts + kContactBlock - 1) / kContactBlock;
+  auto live = [&](std::size_t b) {
+    poll();
+    Counts counts;
+    judge_contacts(b * kContactBlock, std::min(n_contacts, (b + 1) * kContactBlock), s.contraction, s.friction,
+                   s.momentum, s.centre, counts);
+    s.contacts_unjudged += counts.unjudged;
+    s.dynamic_pairs += counts.dynamic_pairs;
+  };
+  const unsigned threads = loop_threads(s.options.threads, n_contacts, kParallelContactsFrom);
+  if (threads <= 1 || blocks < 2) {
+    for (std::size_t b = 0; b < blocks; ++b) live(b);
+  } else {
+    struct Block {
+      DryCheck contraction, friction, momentum, centre;
+      Counts counts;
+    };
+    std::vector<Block> dry(blocks);
+    parallel_items_on(blocks, threads, s.options.stop, [&](std::size_t b, unsigned) {
+      Block& d = dry[b];
+      judge_contacts(b * kContactBlock, std::min(n_contacts, (b + 1) * kContactBlock), d.contraction, d.friction,
+                     d.momentum, d.centre, d.counts);
+    });
+    for (std::size_t b = 0; b < blocks; ++b) {
+      const Block& d = dry[b];
+      if (d.contraction.replays(s.contraction) || d.friction.replays(s.friction) || d.momentum.replays(s.momentum) ||
+          d.centre.replays(s.centre)) {
+        live(b);
+        continue;
+      }
+      d.contraction.add_to(s.contraction);
+      d.friction.add_to(s.friction);
+      d.momentum.add_to(s.momentum);
+      d.centre.add_to(s.centre);
+      s.contacts_unjudged += d.counts.unjudged;
+      s.dynamic_pairs += d.counts.dynamic_pairs;
     }
   }
 } catch (const PairLimitError& e) {
