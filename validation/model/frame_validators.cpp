@@ -166,10 +166,10 @@ bool comparable(BroadPhaseCost cost, std::size_t n) {
 
 /// The most boxes a subquadratic broadphase is compared on in every judged frame: above, it
 /// is compared once in ceil(n / this) judged frames from the first. octocd's three CPU
-/// broadphases take about 0.4 s on 16 threads at 10^6 boxes (`validate boxes-uniform-1m
-/// --engine cuda --every 1` on the H200 host: candidate-sets 3.7-4.0 s over 9 compared
-/// frames), so boxes-uniform-1m's 1,000,006 boxes compare each on every 6th judged frame; the
-/// shipped scenes up to 100,006 boxes on every judged frame.
+/// broadphases take about 0.2 s together on 16 threads at 10^6 boxes (`validate
+/// boxes-uniform-1m --engine cuda --frames 300 --every 1` on the H200 host: candidate-sets
+/// 9.9-12.2 s over 50 compared frames), so boxes-uniform-1m's 1,000,006 boxes compare each on
+/// every 6th judged frame; the shipped scenes up to 100,006 boxes on every judged frame.
 constexpr std::size_t kSubquadraticBoxesPerJudgedFrame = 200000;
 
 /// The fewest flat pairs whose midphase-completeness answers (the exhaustive vertex test and
