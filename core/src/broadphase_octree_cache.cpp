@@ -69,11 +69,13 @@
 ///    count, up to 64; a cache that serves a call resets it.
 ///    The answer never depends on this history; `cell_candidates` does (below).
 ///
-/// Threads (broadphase_octree_tree.cpp): from kParallelMinBodies bodies on, step 1 and the
-/// queries of step 4 run on the worker team (octocd/parallel.hpp, current_threads(); cells in chunks;
-/// the overflow tests in chunks of in-tree slots), each appending to its own pair list; the
-/// lists are joined before the sort of step 5, so pairs and candidates do not depend on the
-/// thread count.
+/// Threads (broadphase_octree_tree.cpp): from kParallelMinBodies bodies on, step 1, the
+/// slots of step 3 and the queries of step 4 run on the worker team (octocd/parallel.hpp,
+/// current_threads(); cells in chunks; the overflow tests in chunks of in-tree slots), each
+/// appending to its own pair list; the lists are joined before the sort of step 5, so pairs
+/// and candidates do not depend on the thread count. Here, the fattened boxes and the
+/// escape check (blocks of bodies, their lists joined in order) from 4,096 bodies and the
+/// kept pairs' filter (blocks of pairs, placed in order) from 16,384 pairs run there too.
 ///
 /// `cell_candidates` counts the pairs that reach an exact AABB test: on a call that runs
 /// steps 1-5 on the boxes, the tree's tests; on a hit, the kept pairs (all tested on the

@@ -38,9 +38,10 @@
 /// apart and merged in), with a fall-back to a full sort when the order changed a lot.
 /// Buffers are kept between calls.
 ///
-/// Threads: the keys, the full sort, the copies and pass 2 (in subtrees) run on the worker
-/// team (octocd/parallel.hpp, current_threads()); the pairs and counts do not depend on the
-/// thread count.
+/// Threads: the keys and their kept/moved split (in blocks), the re-sort of the kept order
+/// (in runs cut at node boundaries) or the full sort, the copies and pass 2 (subtrees, and
+/// the nodes above them in runs) run on the worker team (octocd/parallel.hpp,
+/// current_threads()); the pairs and counts do not depend on the thread count.
 
 #include <algorithm>
 #include <atomic>
