@@ -76,21 +76,32 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     std::int64_t frame;
     bool keep_past;
     std::size_t cap;
+    unsigned threads;
     ~Remember() {
       if (!keep_past) return;
       // The oldest poses' memory, once the past is full, takes this step's (no fresh pages:
-      // at 10^6 bodies a step's poses are 28 MB).
+      // at 10^6 bodies a step's poses are 28 MB), copied in ranges on the threads (no stop:
+      // the past must be whole).
       std::vector<Pose> poses;
       if (st.past.size() >= cap) {
         poses = std::move(st.past.back());
         st.past.pop_back();
       }
-      poses.assign(det.begin(), det.end());
+      poses.resize(det.size());
+      LoopOptions o;
+      o.threads = static_cast<int>(threads);
+      o.chunk = std::max<std::size_t>(1, det.size() / (8 * std::size_t(threads)));
+      parallel_chunks(det.size(), o, [&](std::size_t first, std::size_t last, unsigned) {
+        std::copy(det.begin() + std::ptrdiff_t(first), det.begin() + std::ptrdiff_t(last),
+                  poses.begin() + std::ptrdiff_t(first));
+      });
       st.past.push_front(std::move(poses));
       st.past_frame = frame;
       while (st.past.size() > cap) st.past.pop_back();
     }
-  } remember{st, det, rec.frame, keep_past, std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1)))};
+  } remember{st, det, rec.frame, keep_past,
+             std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1))),
+             loop_threads(threads, n, kParallelIndexFrom)};
   if (!feasibility_step(f)) return;
   auto [infeasible] = tallies(RowId::ImpulseFeasibility, "infeasible");
   ++st.steps;
