@@ -149,6 +149,30 @@ TEST_P(PlantedFault, IsCaught) {
 
 INSTANTIATE_TEST_SUITE_P(Faults, PlantedFault, ::testing::Range(0, 6));
 
+// Bodies in free flight (islands of one body without contacts, judged on their own: the
+// integration, Eq. 23 and their tolerances) are every one judged, and a wrong integration
+// fails each of them: explicit Euler's position is dt^2 |g| = 1e-4 m off a step.
+TEST(AppliedState, BodiesInFreeFlightAreEachJudged) {
+  const Scene scene = parse_scene(R"({
+    "name": "apart", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "gravity": [0, -100, 0],
+    "frames": 20, "walls": "none",
+    "groups": [
+      {"name": "boxes", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 8, "mass": 1.0,
+       "layout": {"type": "grid", "min": [-0.3, -0.3, -0.3], "max": [0.3, 0.3, 0.3], "spacing": 0.6},
+       "velocity": {"type": "random", "max": 0.5, "seed": 5}}
+    ]})",
+                                  "apart (test)");
+  const ValidationResult good = find(validate_with(scene, PlantedFaults{}, 20), "applied-state");
+  EXPECT_TRUE(good.pass) << good.detail;
+  EXPECT_NE(good.detail.find("160 of 160 dynamic body-frames judged"), std::string::npos) << good.detail;
+  PlantedFaults explicit_euler;
+  explicit_euler.explicit_euler = true;
+  const ValidationResult bad = find(validate_with(scene, explicit_euler, 20), "applied-state");
+  EXPECT_FALSE(bad.pass);
+  EXPECT_EQ(bad.measured, 160.0) << bad.detail;
+  EXPECT_NE(bad.detail.find("frame 1: body 0 x.y"), std::string::npos) << bad.detail;
+}
+
 TEST(AppliedState, WrongBodyImpulseBreaksMomentumOfIsolatedGroups) {
   PlantedFaults f;
   f.impulse_wrong_body = true;

@@ -57,7 +57,7 @@ struct Choice {
 
 /// The fewest bodies and contacts, summed over a frame's islands, whose searches run on the
 /// validators' threads (two islands or more): below it one thread costs less than waking
-/// another (applied-state costs about 430 instructions a body on islands of one body).
+/// another (a few hundred instructions a body on islands of one body).
 constexpr std::size_t kParallelIslandWorkFrom = 1024;
 /// The fewest bodies integrated on the validators' threads (a few instructions each).
 constexpr std::size_t kParallelIntegrateFrom = 1024;
@@ -118,6 +118,41 @@ struct RunScratch {
   std::vector<double> coord_max, vel_max, run_v;
   std::vector<float> w;
   std::vector<std::uint32_t> count;
+};
+
+/// A body's rounding scales at a run's start, per axis: |x| + |dt v| for its position and
+/// |v| + |dt g| for its velocity (|v| for a static body), x and v the integrated state.
+void start_scales(const D3& x, const D3& v, bool dynamic, double dt, const D3& g, D3& scale_x, D3& scale_v) {
+  for (int k = 0; k < 3; ++k) {
+    scale_x[k] = std::fabs(x[k]) + std::fabs(dt * v[k]);
+    scale_v[k] = std::fabs(v[k]) + (dynamic ? std::fabs(dt * g[k]) : 0.0);
+  }
+}
+
+/// Eq. 23 on a dynamic body's velocity after `iterations` passes: each component clamped to
+/// [-v_max, v_max]. The clamp is continuous, so a component near v_max needs no branch;
+/// returns true where a component is within rounding of v_max or beyond (conservative:
+/// the clamp changes its group's momentum).
+bool clamp_velocity(D3& v, double vmax, int iterations) {
+  bool clamped = false;
+  for (int k = 0; k < 3; ++k) {
+    if (std::fabs(v[k]) > vmax * (1.0 - 16.0 * kEps32 * (iterations + 2))) clamped = true;
+    v[k] = std::min(std::max(v[k], -vmax), vmax);
+  }
+  return clamped;
+}
+
+/// The float32 tolerance of a run's value: `ulps` (a few roundings per pass) of its start
+/// scale and of the largest input that entered it, plus 1e-12.
+double run_tolerance(double ulps, double scale, double largest) { return ulps * (scale + largest) + 1e-12; }
+
+/// A dynamic body's worst ratio |engine - prediction| / tolerance over its world AABB's
+/// min corner, position and velocity (infinity for NaN), and the quantity it is on.
+struct BodyFigure {
+  double ratio = 0.0;
+  const char* quantity = nullptr;
+  int k = 0;
+  double got = 0, want = 0, tolerance = 0;
 };
 
 /// One thread's island (its vectors rebuilt per island), the run judged against, and the
@@ -191,6 +226,16 @@ struct AppliedStateJudge::Impl {
   /// `group_isolated` (left as they are otherwise).
   void judge_island(std::size_t j, bool judge_response, IslandWorker& w, GroupFigures& group,
                     std::uint8_t& group_isolated) const;
+  /// The float32 tolerance's roundings per unit of scale after the scene's passes.
+  double run_ulps() const {
+    return tol.applied_state_ulps * kEps32 * (model->scene.response.iterations + 2);
+  }
+  /// Dynamic body i's figure against the prediction x, v with tolerances x_tol, v_tol.
+  BodyFigure body_figure(std::uint32_t i, const D3& x, const D3& v, const D3& x_tol, const D3& v_tol) const;
+  /// A body alone in its island, without contacts: its run (the integration, Eq. 23, its
+  /// tolerances) judged; true with its verdict added to `t` where it passes, false (nothing
+  /// added) where it does not.
+  bool judge_free_body(std::uint32_t i, IslandTally& t) const;
   int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
@@ -246,10 +291,7 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
     r.v[l] = v_int[i];
     xf[l] = xf_int[i];
     vf[l] = vf_int[i];
-    for (int k = 0; k < 3; ++k) {
-      scale_x[l][k] = std::fabs(r.x[l][k]) + std::fabs(dt * r.v[l][k]);
-      scale_v[l][k] = std::fabs(r.v[l][k]) + (w[l] > 0.0f ? std::fabs(dt * g[k]) : 0.0);
-    }
+    start_scales(r.x[l], r.v[l], w[l] > 0.0f, dt, g, scale_x[l], scale_v[l]);
     run_v[l] = inf_norm(scale_v[l]);
   }
 
@@ -278,7 +320,9 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
     return out;
   };
 
-  for (int pass = 0; pass < p.iterations; ++pass) {
+  // Without contacts (a body in free flight) a pass changes nothing: none is run.
+  const int passes = nc > 0 ? p.iterations : 0;
+  for (int pass = 0; pass < passes; ++pass) {
     poll();  // a pass over a pile's one island of 10^5 contacts: milliseconds
     // Rounding margin of a decision in this pass: a few roundings of the magnitudes that
     // entered its value, per pass so far.
@@ -475,24 +519,56 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
       run_v[l] = inf_norm(scale_v[l]);
     }
   }
-  // Eq. 23: clamp each component to [-v_max, v_max]. The clamp is continuous, so a
-  // component near v_max needs no branch; `clamped` is conservative (within rounding
-  // counts) since it changes the group's momentum.
-  const double vmax = p.max_velocity;
-  for (std::size_t l = 0; l < nl; ++l) {
-    if (!(w[l] > 0.0f)) continue;
-    for (int k = 0; k < 3; ++k) {
-      if (std::fabs(r.v[l][k]) > vmax * (1.0 - 16.0 * kEps32 * (p.iterations + 2))) r.clamped[l] = 1;
-      r.v[l][k] = std::min(std::max(r.v[l][k], -vmax), vmax);
-    }
-  }
-  // float32 tolerance: a few roundings of each magnitude that entered the value, per pass.
-  const double ulps = tol.applied_state_ulps * kEps32 * (p.iterations + 2);
+  // Eq. 23 on the dynamic bodies.
+  for (std::size_t l = 0; l < nl; ++l)
+    if (w[l] > 0.0f && clamp_velocity(r.v[l], p.max_velocity, p.iterations)) r.clamped[l] = 1;
+  const double ulps = run_ulps();
   for (std::size_t l = 0; l < nl; ++l)
     for (int k = 0; k < 3; ++k) {
-      r.x_tol[l][k] = ulps * (scale_x[l][k] + coord_max[l]) + 1e-12;
-      r.v_tol[l][k] = ulps * (scale_v[l][k] + vel_max[l]) + 1e-12;
+      r.x_tol[l][k] = run_tolerance(ulps, scale_x[l][k], coord_max[l]);
+      r.v_tol[l][k] = run_tolerance(ulps, scale_v[l][k], vel_max[l]);
     }
+}
+
+BodyFigure AppliedStateJudge::Impl::body_figure(std::uint32_t i, const D3& x, const D3& v, const D3& x_tol,
+                                                const D3& v_tol) const {
+  const FrameRecord& fr = *rec;
+  BodyFigure b;
+  auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
+    const double ratio = std::fabs(got - want) / tolerance;
+    if ((ratio <= b.ratio || std::isnan(b.ratio)) && b.quantity) return;
+    b = {std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio, quantity, k, got, want, tolerance};
+  };
+  const Aabb& local = model->local_box(i);
+  for (int k = 0; k < 3; ++k) {
+    // The world AABB the engine used is its integrated position's box (design.md section 4.2); the
+    // float32 sum local + x rounds at the scale of both.
+    const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
+    judge("aabb.min", k, fr.aabbs[i].min[k], static_cast<double>(local.min[k]) + x_int[i][k],
+          x_tol[k] + tol.applied_state_ulps * box_scale * kEps32);
+    judge("x", k, fr.x_post[i][k], x[k], x_tol[k]);
+    judge("v", k, fr.v_post[i][k], v[k], v_tol[k]);
+  }
+  return b;
+}
+
+bool AppliedStateJudge::Impl::judge_free_body(std::uint32_t i, IslandTally& t) const {
+  const Scene& sc = model->scene;
+  D3 x = x_int[i], v = v_int[i], scale_x, scale_v, x_tol, v_tol;
+  start_scales(x, v, true, sc.dt, d3(sc.gravity), scale_x, scale_v);
+  clamp_velocity(v, sc.response.max_velocity, sc.response.iterations);
+  const double ulps = run_ulps();
+  for (int k = 0; k < 3; ++k) {
+    x_tol[k] = run_tolerance(ulps, scale_x[k], 0.0);
+    v_tol[k] = run_tolerance(ulps, scale_v[k], 0.0);
+  }
+  const double ratio = body_figure(i, x, v, x_tol, v_tol).ratio;
+  if (!(ratio <= 1.0)) return false;
+  ++t.counts.runs;
+  ++t.dynamic_frames;
+  ++t.checks;
+  t.worst = std::max(t.worst, ratio);
+  return true;
 }
 
 void AppliedStateJudge::Impl::compare(const Island& is, Run& r) const {
@@ -646,9 +722,14 @@ void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, I
   const Scene& sc = m.scene;
   const FrameRecord& fr = *rec;
   const std::vector<float>& w = m.initial.w;
+  IslandTally& t = wk.tally;
+  // One dynamic body without contacts: judged from its integration alone when it passes
+  // (the general way below names a failure and counts its search).
+  if (judge_response && dyn_start[j + 1] - dyn_start[j] == 1 && con.size(j) == 0 &&
+      judge_free_body(by_root.items[dyn_start[j]], t))
+    return;
   Island& is = wk.island;
   build_island(j, is);
-  IslandTally& t = wk.tally;
   search(is, judge_response, wk.judged, t.counts, wk.run);
   const Run& r = wk.run;
   if (judge_response)
@@ -659,29 +740,8 @@ void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, I
         ++t.unjudged;
         continue;
       }
-      // The worst quantity's figures, worded only for a failure.
-      double body_worst = 0.0;
-      struct Worst {
-        const char* quantity = nullptr;
-        int k = 0;
-        double got = 0, want = 0, tolerance = 0;
-      } w_args;
-      auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
-        const double ratio = std::fabs(got - want) / tolerance;
-        if ((ratio <= body_worst || std::isnan(body_worst)) && w_args.quantity) return;
-        body_worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
-        w_args = {quantity, k, got, want, tolerance};
-      };
-      const Aabb& local = m.local_box(i);
-      for (int k = 0; k < 3; ++k) {
-        // The world AABB the engine used is its integrated position's box (design.md section 4.2); the
-        // float32 sum local + x rounds at the scale of both.
-        const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
-        judge("aabb.min", k, fr.aabbs[i].min[k], static_cast<double>(local.min[k]) + x_int[i][k],
-              r.x_tol[l][k] + tol.applied_state_ulps * box_scale * kEps32);
-        judge("x", k, fr.x_post[i][k], r.x[l][k], r.x_tol[l][k]);
-        judge("v", k, fr.v_post[i][k], r.v[l][k], r.v_tol[l][k]);
-      }
+      const BodyFigure b = body_figure(i, r.x[l], r.v[l], r.x_tol[l], r.v_tol[l]);
+      const double body_worst = b.ratio;
       ++t.checks;
       t.worst = std::max(t.worst, body_worst);
       if (body_worst <= 1.0) continue;
@@ -690,8 +750,7 @@ void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, I
         t.first_island = j;
         t.first = fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} "
                               "(tolerance {:.3g}; {} contacts)",
-                              fr.frame, i, w_args.quantity, "xyz"[w_args.k], w_args.got, w_args.want,
-                              w_args.tolerance, r.count0[l]);
+                              fr.frame, i, b.quantity, "xyz"[b.k], b.got, b.want, b.tolerance, r.count0[l]);
       }
     }
 
