@@ -184,6 +184,41 @@ TEST(AppliedState, WrongBodyImpulseBreaksMomentumOfIsolatedGroups) {
   EXPECT_NE(r.detail.find("isolated group of 2 bodies"), std::string::npos) << r.detail;
 }
 
+// Every isolated group is judged, whichever island it is: two head-on pairs 1 m apart, the
+// same collision at the same steps, are judged twice as often as one (their islands are
+// numbered 0 and 1 while both collide), and the wrong body's impulse fails both.
+TEST(AppliedState, EveryIsolatedGroupIsJudged) {
+  auto pairs = [](int count) {
+    std::string groups;
+    for (int k = 0; k < count; ++k)
+      groups += fmt::format(R"({}{{"name": "light{}", "shape": {{"box": [0.1, 0.1, 0.1]}}, "count": 1, "mass": 1.0,
+         "positions": [[-0.3, 0, {}]], "velocity": {{"type": "fixed", "value": [2, 0.1, 0]}}}},
+        {{"name": "heavy{}", "shape": {{"box": [0.1, 0.1, 0.1]}}, "count": 1, "mass": 4.0,
+         "positions": [[0.3, 0, {}]], "velocity": {{"type": "fixed", "value": [-1, 0, 0]}}}})",
+                            k ? ", " : "", k, k, k, k);
+    return parse_scene(R"({"name": "head-on pairs", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]},
+      "gravity": [0, 0, 0], "frames": 200, "walls": "none", "groups": [)" + groups + "]}",
+                       "head-on pairs (test)");
+  };
+  auto groups_judged = [](const ValidationResult& r) {
+    const std::size_t at = r.detail.find(" isolated groups on the applied state judged");
+    EXPECT_NE(at, std::string::npos) << r.detail;
+    if (at == std::string::npos) return -1L;
+    const std::size_t from = r.detail.rfind(' ', at - 1) + 1;
+    return std::stol(r.detail.substr(from, at - from));
+  };
+  const long one = groups_judged(find(validate_with(pairs(1), PlantedFaults{}), "impulse-conservation"));
+  const ValidationResult two = find(validate_with(pairs(2), PlantedFaults{}), "impulse-conservation");
+  EXPECT_TRUE(two.pass) << two.detail;
+  EXPECT_GT(one, 0);
+  EXPECT_EQ(groups_judged(two), 2 * one) << two.detail;
+  PlantedFaults f;
+  f.impulse_wrong_body = true;
+  const ValidationResult bad = find(validate_with(pairs(2), f), "impulse-conservation");
+  EXPECT_FALSE(bad.pass);
+  EXPECT_GE(bad.measured, 2.0) << bad.detail;
+}
+
 // The islands are judged on the validators' threads and their tallies summed: the verdicts,
 // the counts and the first failures (the lowest island's body, the lowest root's group) are
 // the serial judge's. 1,728 boxes 2 cm apart with random velocities collide in pairs and

@@ -198,6 +198,8 @@ struct AppliedStateJudge::Impl {
   /// Per island: its group's figures (written by judge_island where `isolated` is 1).
   std::vector<GroupFigures> group_figures;
   std::vector<std::uint8_t> isolated;
+  /// The islands whose `isolated` is 1, ascending.
+  std::vector<std::uint32_t> isolated_islands;
   /// Per thread of the islands' loop (the memory of its island and run kept between frames).
   std::vector<IslandWorker> workers;
 
@@ -924,8 +926,11 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   // Isolated dynamic groups, in island order. Momentum is exchanged in equal and opposite
   // impulses, so it is kept; the mass-weighted centre is kept where every body has one
   // contact (an isolated pair): elsewhere the per-body averaging moves it by design.
-  for (std::size_t j = 0; j < islands; ++j) {
-    if (!s.isolated[j]) continue;
+  // Listed on the threads (parallel_select: in island order), then judged in that order.
+  parallel_select(
+      islands, s.isolated_islands, loop_threads(s.threads, islands, kParallelSelectFrom), s.stop,
+      [&](std::size_t j) { return s.isolated[j] != 0; }, [](std::size_t j) { return static_cast<std::uint32_t>(j); });
+  for (const std::uint32_t j : s.isolated_islands) {
     const GroupFigures& gr = s.group_figures[j];
     s.group_momentum.check(gr.dp <= gr.bound, gr.dp / gr.bound, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
