@@ -241,24 +241,23 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     f.pair_fig.assign(n_groups, threads);
     f.row_fig.assign(rec.contacts.size(), threads);
     f.aabb_ref.assign(bodies.contact_geometry == ContactGeometry::Aabb ? n_groups : 0, threads);
-    std::vector<std::uint32_t>& group_begin = work.group_begin;
-    std::vector<std::uint32_t>& group_list = work.group_list;
-    group_begin.assign(all.size() + 1, 0);
-    group_list.assign(n_groups, 0);
     {
+      // Each group's truth entry, looked up in blocks on the threads (each block onwards
+      // from its own cursor), then the groups listed per entry in group order (group_items;
+      // a group whose pair is not in the truth is in no list).
       std::vector<std::size_t>& group_truth = work.group_truth;
-      group_truth.assign(n_groups, 0);
-      std::size_t cursor = 0;
-      for (std::size_t g = 0; g < n_groups; ++g) {
-        group_truth[g] = f.find_after(rows[g].p, cursor);
-        if (group_truth[g] < all.size()) ++group_begin[group_truth[g] + 1];
-      }
-      for (std::size_t i = 0; i < all.size(); ++i) group_begin[i + 1] += group_begin[i];
-      std::vector<std::uint32_t>& fill = work.fill;
-      fill.assign(group_begin.begin(), group_begin.end() - 1);
-      for (std::size_t g = 0; g < n_groups; ++g)
-        if (group_truth[g] < all.size()) group_list[fill[group_truth[g]]++] = static_cast<std::uint32_t>(g);
+      group_truth.resize(n_groups);
+      const std::size_t group_blocks = (n_groups + kOrderedBlock - 1) / kOrderedBlock;
+      parallel_items_on(group_blocks, loop_threads(threads, n_groups, kParallelRequiredFrom), stop,
+                        [&](std::size_t b, unsigned) {
+        std::size_t cursor = 0;
+        for (std::size_t g = b * kOrderedBlock; g < std::min(n_groups, (b + 1) * kOrderedBlock); ++g)
+          group_truth[g] = f.find_after(rows[g].p, cursor);
+      });
+      group_items(n_groups, all.size(), loop_threads(threads, n_groups, kParallelRequiredFrom), stop,
+                  [&](std::size_t g) { return group_truth[g]; }, work.group_scratch, work.truth_groups);
     }
+    const GroupedItems& truth_groups = work.truth_groups;
     // Per worker: the placed hulls and accepted axes of its last pair (pairs in a chunk
     // share their first body, placed once).
     std::vector<PairReferenceScratch>& scratch = work.scratch;
@@ -271,7 +270,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
       ContactTruth& t = f.truth[i];
       t.assign(pair_reference_into(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings, s));
       t.inflate(radius(p.a), radius(p.b));
-      for (std::uint32_t k = group_begin[i]; k < group_begin[i + 1]; ++k) pair_figures(f, group_list[k], t, s.accepted);
+      for (const std::uint32_t g : truth_groups.group(i)) pair_figures(f, g, t, s.accepted);
     });
   }
   // The candidates are sorted: their truth is looked up onwards from the last one, in

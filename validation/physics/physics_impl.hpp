@@ -328,7 +328,8 @@ struct CheckedFrame {
     std::vector<Pair> todo;          ///< the candidates that intersect
     std::vector<std::size_t> row_starts;  ///< pair_run_starts of the frame's rows
     std::vector<char> is_required;   ///< per candidate: row 1 requires it
-    std::vector<std::uint32_t> group_begin, group_list, fill;  ///< groups of rows per truth entry
+    GroupedItems truth_groups;  ///< per truth entry: its groups of rows, ascending
+    GroupScratch group_scratch;  ///< truth_groups' counts
     std::vector<std::size_t> group_truth;  ///< per group of rows: its truth entry (row 3 reads it too)
     std::vector<PairReferenceScratch> scratch;                 ///< per worker
     ExactPairsTables pair_tables;  ///< exact_pairs' tables: the candidates', then row 1's flat set
