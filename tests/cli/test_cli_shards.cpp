@@ -34,6 +34,14 @@ nlohmann::json load(const fs::path& p) {
   return nlohmann::json::parse(in);
 }
 
+/// The rows of a --json file (docs/validation-output.md), each without its seconds: the
+/// verdict only, for comparing runs.
+nlohmann::json verdict_rows(const fs::path& p) {
+  nlohmann::json j = load(p);
+  for (auto& row : j["rows"]) row.erase("seconds");
+  return j["rows"];
+}
+
 class Shards : public ::testing::Test {
  protected:
   static fs::path dir_;
@@ -189,9 +197,7 @@ TEST(ValidateThreads, GeometricRowsOnThreadsGiveTheSerialVerdict) {
                                 "--tolerance geometry_slack_m=0 --tolerance contact_depth_m=1e-6 --threads " +
                                 threads + " --json " + out.string());
     EXPECT_EQ(r.code, 3) << r.output;
-    nlohmann::json j = load(out);
-    for (auto& row : j["rows"]) row.erase("seconds");
-    return j["rows"];
+    return verdict_rows(out);
   };
   const nlohmann::json serial = rows("1"), threaded = rows("2");
   ASSERT_EQ(serial.size(), threaded.size());
@@ -221,9 +227,7 @@ TEST(ValidateThreads, ThreadsAndPipelineGiveTheSerialVerdict) {
     const Result r = run_octocd("validate " + scene + " --frames 150 --every 10 --against none --threads " + threads +
                                 " --json " + out.string());
     EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;
-    nlohmann::json j = load(out);
-    for (auto& row : j["rows"]) row.erase("seconds");
-    return j["rows"];
+    return verdict_rows(out);
   };
   const nlohmann::json serial = judge("1"), threaded = judge("3");
   ASSERT_EQ(serial.size(), threaded.size());
@@ -252,9 +256,7 @@ TEST(ValidateThreads, PerContactModelRowsOnThreadsGiveTheSerialVerdict) {
     const Result r = run_octocd("validate " + scene + " --frames 8 --every 8 --against none " +
                                 "--tolerance contraction_m=1e-8 --threads " + threads + " --json " + out.string());
     EXPECT_EQ(r.code, 3) << r.output;
-    nlohmann::json j = load(out);
-    for (auto& row : j["rows"]) row.erase("seconds");
-    return j["rows"];
+    return verdict_rows(out);
   };
   const nlohmann::json serial = judge("1"), threaded = judge("2");
   ASSERT_EQ(serial.size(), threaded.size());
